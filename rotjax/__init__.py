@@ -1,0 +1,24 @@
+"""rotjax: 3-D rotation maths in JAX, branch-free and differentiable everywhere it can be."""
+
+from ._euler import euler_to_matrix as euler_to_matrix
+from ._euler import euler_to_quaternion as euler_to_quaternion
+from ._euler import matrix_to_euler as matrix_to_euler
+from ._euler import quaternion_to_euler as quaternion_to_euler
+from ._matrix import matrix_to_quaternion as matrix_to_quaternion
+from ._quaternion import angle_between as angle_between
+from ._quaternion import quaternion_apply as quaternion_apply
+from ._quaternion import quaternion_conjugate as quaternion_conjugate
+from ._quaternion import quaternion_inverse as quaternion_inverse
+from ._quaternion import quaternion_multiply as quaternion_multiply
+from ._quaternion import quaternion_normalize as quaternion_normalize
+from ._quaternion import quaternion_to_matrix as quaternion_to_matrix
+from ._quaternion import relative_rotation as relative_rotation
+from ._quaternion import rotation_angle as rotation_angle
+from ._rotvec import axis_angle_to_quaternion as axis_angle_to_quaternion
+from ._rotvec import matrix_to_rotvec as matrix_to_rotvec
+from ._rotvec import quaternion_to_axis_angle as quaternion_to_axis_angle
+from ._rotvec import quaternion_to_rotvec as quaternion_to_rotvec
+from ._rotvec import rotvec_to_matrix as rotvec_to_matrix
+from ._rotvec import rotvec_to_quaternion as rotvec_to_quaternion
+
+__version__ = "0.1.0"

@@ -1,0 +1,23 @@
+"""``python -m rotjax``: a short demo of the conversions on the seeds' worked examples.
+
+``python -m rotjax bench [--quick]`` runs the speed/accuracy benchmark.
+"""
+
+from __future__ import annotations
+
+import sys
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] == "bench":
+        from ._bench import main as bench_main
+
+        return bench_main(argv[1:])
+    from ._demo import main as demo_main
+
+    return demo_main(argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

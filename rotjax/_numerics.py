@@ -1,0 +1,122 @@
+"""Numerical helpers shared by every module: dtype handling, shape checks, safe maths.
+
+Everything here is private. The helpers follow two rules that the public functions rely on:
+
+* thresholds are functions of the dtype (``_eps``), never fixed constants;
+* any operation that is singular somewhere is guarded by the *double where* pattern: the
+  dangerous operand is replaced by a harmless value before the operation, so that the branch not
+  taken cannot send NaN (or inf) into the gradient.
+"""
+
+from __future__ import annotations
+
+import inspect
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+# Dtypes that are computed in float32 and cast back (they have too few bits for the algorithms).
+_LOW_PRECISION = (jnp.dtype(jnp.bfloat16), jnp.dtype(jnp.float16))
+
+
+def eps(dtype) -> float:
+    """Machine epsilon of ``dtype`` as a Python float."""
+    return float(np.finfo(dtype).eps)
+
+
+def as_float(*xs):
+    """Convert inputs to one floating compute dtype.
+
+    Integers and bools are promoted to JAX's default float; float32 and float64 are preserved;
+    bfloat16 and float16 are computed in float32.
+
+    Returns:
+        ``(arrays, out_dtype)``: the converted arrays (a tuple, one per input) and the dtype the
+        results should be cast back to.
+    """
+    arrs = [jnp.asarray(x) for x in xs]
+    dt = jnp.result_type(*arrs)
+    if not jnp.issubdtype(dt, jnp.floating):
+        dt = jnp.result_type(float)
+    out_dtype = jnp.dtype(dt)
+    compute = jnp.dtype(jnp.float32) if out_dtype in _LOW_PRECISION else out_dtype
+    return tuple(a.astype(compute) for a in arrs), out_dtype
+
+
+def check_shape(x, trailing: tuple[int, ...], name: str) -> None:
+    """Raise ``ValueError`` at trace time unless ``x.shape`` ends with ``trailing``."""
+    n = len(trailing)
+    if x.ndim < n or tuple(x.shape[x.ndim - n :]) != tuple(trailing):
+        want = "(..., " + ", ".join(str(t) for t in trailing) + ")"
+        raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
+
+
+def to_scalar_last(q, scalar_first: bool):
+    """Reorder a quaternion to the internal scalar-last ``(x, y, z, w)`` layout."""
+    return jnp.roll(q, -1, axis=-1) if scalar_first else q
+
+
+def from_scalar_last(q, scalar_first: bool):
+    """Reorder an internal scalar-last quaternion to the caller's layout."""
+    return jnp.roll(q, 1, axis=-1) if scalar_first else q
+
+
+def safe_norm(x, axis=-1):
+    """Euclidean norm with a finite gradient (zero) at the origin.
+
+    The norm is a cone at 0, where no derivative exists; the returned gradient there is the
+    minimum-norm subgradient, 0. Everywhere else it is the true derivative.
+    """
+    sq = jnp.sum(x * x, axis=axis)
+    zero = sq == 0
+    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))  # double where
+
+
+def safe_atan2(y, x):
+    """``atan2`` whose gradient is finite (zero) at ``y = x = 0``, where it returns 0."""
+    zero = (x == 0) & (y == 0)
+    return jnp.where(zero, 0.0, jnp.arctan2(jnp.where(zero, 0.0, y), jnp.where(zero, 1.0, x)))
+
+
+def wrap_angle(a):
+    """Wrap angles into ``[-pi, pi]`` (inputs in ``[-3 pi, 3 pi]``)."""
+    two_pi = 2 * np.pi
+    a = jnp.where(a > np.pi, a - two_pi, a)
+    return jnp.where(a < -np.pi, a + two_pi, a)
+
+
+def cross(a, b):
+    """Cross product over the last axis (broadcasting)."""
+    a0, a1, a2 = jnp.moveaxis(a, -1, 0)
+    b0, b1, b2 = jnp.moveaxis(b, -1, 0)
+    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def hat(v):
+    """Skew-symmetric matrix ``[v]x`` with ``hat(v) @ u == cross(v, u)``; shape ``(..., 3, 3)``."""
+    x, y, z = jnp.moveaxis(v, -1, 0)
+    o = jnp.zeros_like(x)
+    return jnp.stack([o, -z, y, z, o, -x, -y, x, o], axis=-1).reshape(*v.shape[:-1], 3, 3)
+
+
+def vee(m):
+    """Inverse of :func:`hat` on the antisymmetric part of ``m``: ``(..., 3, 3) -> (..., 3)``."""
+    return 0.5 * jnp.stack(
+        [m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]],
+        axis=-1,
+    )
+
+
+# Keyword arguments that select code paths: always static under jit.
+STATIC_ARGS = ("seq", "degrees", "scalar_first", "method", "frame", "axis")
+
+
+def public(fun):
+    """Jit-wrap a public function, with the configuration arguments it takes made static.
+
+    Parsing and validation of those arguments then happens once, in Python, at trace time:
+    errors are raised eagerly and cost nothing on later calls.
+    """
+    params = inspect.signature(fun).parameters
+    return jax.jit(fun, static_argnames=[n for n in STATIC_ARGS if n in params])

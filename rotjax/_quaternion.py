@@ -1,0 +1,251 @@
+"""Quaternion algebra and the quaternion -> matrix map.
+
+Internally every quaternion is scalar last, ``(x, y, z, w)``; ``scalar_first=True`` reorders at the
+boundary. Functions that interpret a quaternion as a rotation normalise it; the algebraic
+functions (product, conjugate) do not, because kinematics needs them on non-unit quaternions.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ._numerics import (
+    as_float,
+    check_shape,
+    cross,
+    from_scalar_last,
+    public,
+    safe_atan2,
+    safe_norm,
+    to_scalar_last,
+)
+
+
+def _prep(q, scalar_first, name="q"):
+    (q,), dt = as_float(q)
+    check_shape(q, (4,), name)
+    return to_scalar_last(q, scalar_first), dt
+
+
+def _prep2(p, q, scalar_first, names=("p", "q")):
+    """Two quaternions in one common compute dtype, scalar last."""
+    (p, q), dt = as_float(p, q)
+    check_shape(p, (4,), names[0])
+    check_shape(q, (4,), names[1])
+    return to_scalar_last(p, scalar_first), to_scalar_last(q, scalar_first), dt
+
+
+def _multiply(p, q):
+    """Hamilton product of scalar-last quaternions (no normalisation)."""
+    px, py, pz, pw = jnp.moveaxis(p, -1, 0)
+    qx, qy, qz, qw = jnp.moveaxis(q, -1, 0)
+    return jnp.stack(
+        [
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+            pw * qw - px * qx - py * qy - pz * qz,
+        ],
+        axis=-1,
+    )
+
+
+def _conjugate(q):
+    return q * jnp.asarray([-1, -1, -1, 1], dtype=q.dtype)
+
+
+def _normalize(q):
+    # 0/0 = NaN for the zero quaternion, on purpose: it is not a rotation.
+    return q / jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))
+
+
+def _to_matrix(q):
+    """Rotation matrix of a scalar-last quaternion of any non-zero norm."""
+    x, y, z, w = jnp.moveaxis(q, -1, 0)
+    s = 2 / (x * x + y * y + z * z + w * w)  # folds the normalisation into one division
+    xx, yy, zz = s * x * x, s * y * y, s * z * z
+    xy, xz, yz = s * x * y, s * x * z, s * y * z
+    xw, yw, zw = s * x * w, s * y * w, s * z * w
+    one = jnp.ones_like(x)
+    return jnp.stack(
+        [
+            one - yy - zz, xy - zw, xz + yw,
+            xy + zw, one - xx - zz, yz - xw,
+            xz - yw, yz + xw, one - xx - yy,
+        ],
+        axis=-1,
+    ).reshape(*q.shape[:-1], 3, 3)  # fmt: skip
+
+
+def _angle(q):
+    """Rotation angle in [0, pi] of a scalar-last quaternion of any norm (NaN for zero)."""
+    w = jnp.abs(q[..., 3])
+    # NaN for the zero quaternion: atan2(0, 0) = 0 would pass for the identity.
+    w = jnp.where(jnp.sum(q * q, axis=-1) == 0, jnp.nan, w)
+    return 2 * safe_atan2(safe_norm(q[..., :3]), w)
+
+
+@public
+def quaternion_to_matrix(q, scalar_first: bool = False):
+    """Rotation matrix of a quaternion.
+
+    Args:
+        q: ``(..., 4)`` quaternion, scalar last ``(x, y, z, w)`` unless ``scalar_first``; need not
+            be unit (it is normalised; the zero quaternion gives NaN).
+        scalar_first: read ``q`` as ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 3, 3)`` active rotation matrix ``R`` with ``v_world = R @ v_body``. ``q`` and
+        ``-q`` give the same matrix.
+    """
+    q, dt = _prep(q, scalar_first)
+    return _to_matrix(q).astype(dt)
+
+
+@public
+def quaternion_multiply(p, q, scalar_first: bool = False):
+    """Hamilton product ``p * q``, so that ``R(p * q) = R(p) @ R(q)``.
+
+    Args:
+        p: ``(..., 4)`` quaternion (layout as ``scalar_first``).
+        q: ``(..., 4)`` quaternion; broadcasts against ``p``.
+        scalar_first: quaternions are ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 4)`` the raw product. It is not normalised: its norm is ``|p| |q|``, which keeps
+        the product bilinear (kinematics relies on that).
+    """
+    p, q, dt = _prep2(p, q, scalar_first)
+    return from_scalar_last(_multiply(p, q), scalar_first).astype(dt)
+
+
+@public
+def quaternion_conjugate(q, scalar_first: bool = False):
+    """Conjugate ``(-x, -y, -z, w)``: the inverse rotation, with the same norm.
+
+    Args:
+        q: ``(..., 4)`` quaternion.
+        scalar_first: ``q`` is ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 4)`` conjugate, in the same layout.
+    """
+    q, dt = _prep(q, scalar_first)
+    return from_scalar_last(_conjugate(q), scalar_first).astype(dt)
+
+
+@public
+def quaternion_inverse(q, scalar_first: bool = False):
+    """Multiplicative inverse ``conj(q) / |q|^2``, so that ``q * inverse(q) = (0, 0, 0, 1)``.
+
+    Args:
+        q: ``(..., 4)`` non-zero quaternion (the zero quaternion gives NaN).
+        scalar_first: ``q`` is ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 4)`` inverse, in the same layout.
+    """
+    q, dt = _prep(q, scalar_first)
+    inv = _conjugate(q) / jnp.sum(q * q, axis=-1, keepdims=True)
+    return from_scalar_last(inv, scalar_first).astype(dt)
+
+
+@public
+def quaternion_normalize(q, scalar_first: bool = False):
+    """Unit quaternion ``q / |q|``; the sign is kept (no hemisphere is imposed).
+
+    Args:
+        q: ``(..., 4)`` quaternion. The zero quaternion gives NaN, on purpose.
+        scalar_first: ``q`` is ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 4)`` unit quaternion, in the same layout.
+    """
+    q, dt = _prep(q, scalar_first)
+    return from_scalar_last(_normalize(q), scalar_first).astype(dt)
+
+
+@public
+def quaternion_apply(q, v, scalar_first: bool = False):
+    """Rotate vectors: ``R(q) @ v``.
+
+    Args:
+        q: ``(..., 4)`` quaternion; need not be unit.
+        v: ``(..., 3)`` vectors; broadcasts against ``q``.
+        scalar_first: ``q`` is ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 3)`` rotated vectors.
+    """
+    (q, v), dt = as_float(q, v)
+    check_shape(q, (4,), "q")
+    check_shape(v, (3,), "v")
+    q = to_scalar_last(q, scalar_first)
+    qv, w = q[..., :3], q[..., 3:]
+    s = 2 / jnp.sum(q * q, axis=-1, keepdims=True)
+    t = cross(qv, v)
+    out = v + s * (w * t + cross(qv, t))
+    return out.astype(dt)
+
+
+@public
+def relative_rotation(q_a, q_b, scalar_first: bool = False):
+    """Rotation from frame ``a`` to frame ``b``: ``q_rel = conj(q_a) * q_b``, normalised.
+
+    With ``R_a``, ``R_b`` the orientations of the two frames in a common (world) frame, the
+    result is ``R_rel = R_a.T @ R_b``: the orientation of ``b`` expressed in ``a``, so that
+    ``R_b = R_a @ R_rel`` and ``v_a = R_rel @ v_b``. This is the matrix the MapleSim
+    relative-angle sensors decompose into Euler angles.
+
+    Args:
+        q_a: ``(..., 4)`` orientation of frame ``a``; need not be unit.
+        q_b: ``(..., 4)`` orientation of frame ``b``; broadcasts against ``q_a``.
+        scalar_first: quaternions are ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 4)`` unit quaternion of the relative rotation (sign as produced by the product).
+    """
+    qa, qb, dt = _prep2(q_a, q_b, scalar_first, ("q_a", "q_b"))
+    rel = _normalize(_multiply(_conjugate(qa), qb))
+    return from_scalar_last(rel, scalar_first).astype(dt)
+
+
+@public
+def rotation_angle(q, scalar_first: bool = False):
+    """Rotation angle ``2 atan2(|q_v|, |w|)`` in ``[0, pi]``.
+
+    Args:
+        q: ``(..., 4)`` quaternion; need not be unit.
+        scalar_first: ``q`` is ``(w, x, y, z)``.
+
+    Returns:
+        ``(...,)`` angle in radians, in ``[0, pi]``; ``q`` and ``-q`` give the same angle.
+
+    Note:
+        atan2 keeps full relative accuracy near 0 and near pi, where ``2 acos(w)`` loses half the
+        digits. At the identity the angle has a cone-shaped minimum and no derivative; the
+        gradient returned there is 0 (the minimum-norm subgradient), finite. Use the squared
+        angle as a smooth loss.
+    """
+    q, dt = _prep(q, scalar_first)
+    return _angle(q).astype(dt)
+
+
+@public
+def angle_between(p, q, scalar_first: bool = False):
+    """Geodesic distance between two rotations: the angle of ``conj(p) * q``, in ``[0, pi]``.
+
+    Args:
+        p: ``(..., 4)`` quaternion; need not be unit.
+        q: ``(..., 4)`` quaternion; broadcasts against ``p``.
+        scalar_first: quaternions are ``(w, x, y, z)``.
+
+    Returns:
+        ``(...,)`` angle in radians in ``[0, pi]``; invariant to the sign of ``p`` and of ``q``.
+
+    Note:
+        Computed with atan2, so it is accurate at 0 and the gradient there is finite (0, the
+        minimum of the cone). See :func:`rotation_angle`.
+    """
+    p, q, dt = _prep2(p, q, scalar_first)
+    return _angle(_multiply(_conjugate(p), q)).astype(dt)

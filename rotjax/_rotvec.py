@@ -1,0 +1,214 @@
+"""Rotation vectors and axis-angle pairs (exponential and logarithm maps)."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ._matrix import _from_matrix
+from ._numerics import (
+    as_float,
+    check_shape,
+    eps,
+    from_scalar_last,
+    hat,
+    public,
+    safe_norm,
+    to_scalar_last,
+)
+from ._quaternion import _angle
+
+
+def _small(x2):
+    """Below this squared argument the Taylor branch is exact to rounding (dtype dependent)."""
+    return x2 < eps(x2.dtype) ** 0.5
+
+
+def _exp_coeffs(theta2):
+    """``sin(t/2)/t`` and ``cos(t/2)`` for ``t = sqrt(theta2)``, smooth at 0 (double where)."""
+    small = _small(theta2)
+    t = jnp.sqrt(jnp.where(small, 1.0, theta2))  # any non-zero value keeps the gradient finite
+    k = jnp.where(small, 0.5 - theta2 / 48 + theta2 * theta2 / 3840, jnp.sin(t / 2) / t)
+    c = jnp.where(small, 1 - theta2 / 8 + theta2 * theta2 / 384, jnp.cos(t / 2))
+    return k, c
+
+
+def _rotvec_to_quat(v):
+    k, c = _exp_coeffs(jnp.sum(v * v, axis=-1))
+    return jnp.concatenate([k[..., None] * v, c[..., None]], axis=-1)
+
+
+def _quat_to_rotvec(q):
+    """Logarithm map of a scalar-last quaternion of any non-zero norm; angle in [0, pi]."""
+    q = jnp.where(q[..., 3:] < 0, -q, q)  # w >= 0 gives the angle in [0, pi]
+    qv, w = q[..., :3], q[..., 3]
+    n2 = jnp.sum(qv * qv, axis=-1)
+    w2 = w * w
+    # 2 atan2(n, w) / n, with the Taylor series in (n/w)^2 near the identity (double where).
+    small = n2 < eps(q.dtype) ** 0.5 * w2
+    n = jnp.sqrt(jnp.where(small, 1.0, n2))
+    t2 = n2 / jnp.where(small, w2, 1.0)
+    wsafe = jnp.where(small, w, 1.0)
+    k = jnp.where(small, (2 - 2 * t2 / 3 + 2 * t2 * t2 / 5) / wsafe, 2 * jnp.arctan2(n, w) / n)
+    # NaN for the zero quaternion (0 * (2 atan2(0, 0) / 0) would otherwise be a silent 0).
+    k = jnp.where(n2 + w2 == 0, jnp.nan, k)
+    return k[..., None] * qv
+
+
+@public
+def rotvec_to_quaternion(rotvec, degrees: bool = False, scalar_first: bool = False):
+    """Exponential map: rotation vector ``theta * axis`` to a unit quaternion.
+
+    Args:
+        rotvec: ``(..., 3)`` rotation vector; its norm is the angle (any size) and its direction
+            the axis (right-hand rule).
+        degrees: the norm of ``rotvec`` is in degrees.
+        scalar_first: return ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 4)`` unit quaternion ``(sin(t/2) axis, cos(t/2))``. ``w`` is negative for angles
+        above pi; no hemisphere is imposed, so the map is smooth everywhere.
+
+    Note:
+        Smooth at the zero vector, where a Taylor branch (double where) gives the exact
+        derivative ``d q_v / d rotvec = I / 2``.
+    """
+    (v,), dt = as_float(rotvec)
+    check_shape(v, (3,), "rotvec")
+    if degrees:
+        v = jnp.deg2rad(v)
+    return from_scalar_last(_rotvec_to_quat(v), scalar_first).astype(dt)
+
+
+@public
+def quaternion_to_rotvec(q, degrees: bool = False, scalar_first: bool = False):
+    """Logarithm map: unit quaternion to the rotation vector of angle in ``[0, pi]``.
+
+    Args:
+        q: ``(..., 4)`` quaternion; need not be unit (zero gives NaN).
+        degrees: return the vector with its norm in degrees.
+        scalar_first: ``q`` is ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 3)`` rotation vector with norm in ``[0, pi]`` (or ``[0, 180]``).
+
+    Note:
+        Uses ``2 atan2(|q_v|, |w|) / |q_v|`` with a Taylor branch near the identity, so the
+        derivative there is exact: ``d rotvec / d q_v = 2 I`` for a unit ``q``. At exactly
+        180 degrees both ``v`` and ``-v`` are valid; the one from the sign of ``q_v`` after
+        choosing ``w >= 0`` is returned, and the map jumps there (it must: the log has a cut).
+    """
+    (q,), dt = as_float(q)
+    check_shape(q, (4,), "q")
+    v = _quat_to_rotvec(to_scalar_last(q, scalar_first))
+    if degrees:
+        v = jnp.rad2deg(v)
+    return v.astype(dt)
+
+
+@public
+def rotvec_to_matrix(rotvec, degrees: bool = False):
+    """Rodrigues formula: rotation vector to an active rotation matrix.
+
+    Args:
+        rotvec: ``(..., 3)`` rotation vector (angle = norm, any size).
+        degrees: the norm is in degrees.
+
+    Returns:
+        ``(..., 3, 3)`` rotation matrix ``I + sin(t)/t K + (1 - cos t)/t^2 K^2`` with
+        ``K = hat(rotvec)``.
+
+    Note:
+        ``(1 - cos t)`` is evaluated as ``2 sin^2(t/2)`` (no cancellation), and both coefficients
+        have Taylor branches at 0, so values and gradients are exact at the zero vector.
+    """
+    (v,), dt = as_float(rotvec)
+    check_shape(v, (3,), "rotvec")
+    if degrees:
+        v = jnp.deg2rad(v)
+    k, c = _exp_coeffs(jnp.sum(v * v, axis=-1))
+    # sin(t)/t = 2 k c and (1 - cos t)/t^2 = 2 k^2, both smooth in theta^2.
+    a = (2 * k * c)[..., None, None]
+    b = (2 * k * k)[..., None, None]
+    K = hat(v)
+    eye = jnp.eye(3, dtype=v.dtype)
+    return (eye + a * K + b * (K @ K)).astype(dt)
+
+
+@public
+def matrix_to_rotvec(R, degrees: bool = False):
+    """Logarithm of a rotation matrix, via the branch-free quaternion extraction.
+
+    Args:
+        R: ``(..., 3, 3)`` active rotation matrix.
+        degrees: return the norm in degrees.
+
+    Returns:
+        ``(..., 3)`` rotation vector with norm in ``[0, pi]``.
+
+    Note:
+        Going through :func:`matrix_to_quaternion` keeps full accuracy at 180 degrees, where
+        ``acos((trace - 1) / 2)`` formulas lose half the digits and the axis from the
+        antisymmetric part vanishes.
+    """
+    (R,), dt = as_float(R)
+    check_shape(R, (3, 3), "R")
+    v = _quat_to_rotvec(_from_matrix(R, "shepperd"))
+    if degrees:
+        v = jnp.rad2deg(v)
+    return v.astype(dt)
+
+
+@public
+def axis_angle_to_quaternion(axis, angle, degrees: bool = False, scalar_first: bool = False):
+    """Quaternion of a rotation by ``angle`` about ``axis``.
+
+    Args:
+        axis: ``(..., 3)`` rotation axis; need not be unit (the zero axis gives NaN).
+        angle: ``(...)`` angle (right-hand rule); broadcasts against ``axis[..., 0]``.
+        degrees: ``angle`` is in degrees.
+        scalar_first: return ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 4)`` unit quaternion ``(sin(angle/2) n, cos(angle/2))``, ``n = axis / |axis|``.
+    """
+    (axis, angle), dt = as_float(axis, angle)
+    check_shape(axis, (3,), "axis")
+    if degrees:
+        angle = jnp.deg2rad(angle)
+    n = axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True))
+    half = angle[..., None] / 2
+    q = jnp.concatenate([jnp.sin(half) * n, jnp.cos(half)], axis=-1)
+    return from_scalar_last(q, scalar_first).astype(dt)
+
+
+@public
+def quaternion_to_axis_angle(q, degrees: bool = False, scalar_first: bool = False):
+    """Axis and angle of a quaternion, with the angle in ``[0, pi]``.
+
+    Args:
+        q: ``(..., 4)`` quaternion; need not be unit (zero gives NaN).
+        degrees: return the angle in degrees.
+        scalar_first: ``q`` is ``(w, x, y, z)``.
+
+    Returns:
+        ``(axis, angle)``: ``(..., 3)`` unit axis and ``(...)`` angle in ``[0, pi]``.
+
+    Note:
+        At the identity the axis is undefined; ``(1, 0, 0)`` is returned, with a zero gradient
+        (finite, by the double where). The angle uses atan2 (see :func:`rotation_angle`).
+    """
+    (q,), dt = as_float(q)
+    check_shape(q, (4,), "q")
+    q = to_scalar_last(q, scalar_first)
+    q = jnp.where(q[..., 3:] < 0, -q, q)
+    qv = q[..., :3]
+    n = safe_norm(qv)
+    ident = (n == 0)[..., None]
+    e_x = jnp.asarray([1.0, 0.0, 0.0], dtype=q.dtype)
+    axis = jnp.where(ident, e_x, qv / jnp.where(ident, 1.0, n[..., None]))
+    # NaN (not a valid-looking identity) for the zero quaternion.
+    axis = jnp.where(jnp.sum(q * q, axis=-1, keepdims=True) == 0, jnp.nan, axis)
+    angle = _angle(q)
+    if degrees:
+        angle = jnp.rad2deg(angle)
+    return axis.astype(dt), angle.astype(dt)

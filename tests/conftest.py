@@ -1,0 +1,17 @@
+"""Strict test environment: float64 enabled, strict dtype promotion, a deadline-free profile."""
+
+import jax
+import numpy as np
+from hypothesis import HealthCheck, settings
+
+jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_numpy_dtype_promotion", "strict")
+
+settings.register_profile(
+    "rotjax",
+    deadline=None,  # the first call of every example compiles
+    max_examples=60,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.load_profile("rotjax")
+np.seterr(all="raise")
