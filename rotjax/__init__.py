@@ -4,6 +4,22 @@ from ._euler import euler_to_matrix as euler_to_matrix
 from ._euler import euler_to_quaternion as euler_to_quaternion
 from ._euler import matrix_to_euler as matrix_to_euler
 from ._euler import quaternion_to_euler as quaternion_to_euler
+from ._kinematics import angular_velocity_to_euler_rates as angular_velocity_to_euler_rates
+from ._kinematics import (
+    angular_velocity_to_matrix_derivative as angular_velocity_to_matrix_derivative,
+)
+from ._kinematics import euler_rate_matrix as euler_rate_matrix
+from ._kinematics import euler_rates_to_angular_velocity as euler_rates_to_angular_velocity
+from ._kinematics import euler_singularity as euler_singularity
+from ._kinematics import integrate_angular_velocity as integrate_angular_velocity
+from ._kinematics import (
+    matrix_derivative_to_angular_velocity as matrix_derivative_to_angular_velocity,
+)
+from ._kinematics import quaternion_derivative as quaternion_derivative
+from ._kinematics import (
+    quaternion_derivative_to_angular_velocity as quaternion_derivative_to_angular_velocity,
+)
+from ._kinematics import unwrap_euler as unwrap_euler
 from ._matrix import matrix_to_quaternion as matrix_to_quaternion
 from ._quaternion import angle_between as angle_between
 from ._quaternion import quaternion_apply as quaternion_apply
