@@ -4,6 +4,14 @@ from ._euler import euler_to_matrix as euler_to_matrix
 from ._euler import euler_to_quaternion as euler_to_quaternion
 from ._euler import matrix_to_euler as matrix_to_euler
 from ._euler import quaternion_to_euler as quaternion_to_euler
+from ._fitting import align_vectors as align_vectors
+from ._fitting import chordal_distance as chordal_distance
+from ._fitting import geodesic_distance as geodesic_distance
+from ._fitting import matrix_to_sixd as matrix_to_sixd
+from ._fitting import nined_to_matrix as nined_to_matrix
+from ._fitting import quaternion_mean as quaternion_mean
+from ._fitting import sixd_to_matrix as sixd_to_matrix
+from ._fitting import slerp as slerp
 from ._kinematics import angular_velocity_to_euler_rates as angular_velocity_to_euler_rates
 from ._kinematics import (
     angular_velocity_to_matrix_derivative as angular_velocity_to_matrix_derivative,

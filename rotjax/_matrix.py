@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
+from jax import lax
 
 from ._numerics import as_float, check_shape, from_scalar_last, public
 
@@ -61,6 +63,63 @@ def _positive_w(q):
     return jnp.where(q[..., 3:] < 0, -q, q)
 
 
+def _select(masks, vals):
+    """``vals[i]`` for the first true mask ``(use_x, use_y, use_z)``, else ``vals[3]``."""
+    use_x, use_y, use_z = masks
+    v = jnp.where(use_z, vals[2], vals[3])
+    v = jnp.where(use_y, vals[1], v)
+    return jnp.where(use_x, vals[0], v)
+
+
+@jax.custom_jvp
+def _shepperd(R):
+    """Shepperd extraction, scalar last, ``w >= 0``: the selected column of ``K`` over its norm.
+
+    Written for XLA:CPU, measured with ``python -m rotjax bench``: every step is a per-rotation
+    scalar expression (no reduction over a stacked axis), the scale ``rsqrt(|column|^2)`` is a
+    separate per-rotation value, and the components are stacked on a leading axis and moved to
+    the end. That lets XLA emit one loop for the scale and one transposing loop for the
+    components (about 2.5x faster in float32 than stacking on the last axis and normalising
+    with a sum, which XLA split into three loops and recomputed the norm per component).
+    """
+    cols, (dx, dy, dz, dw) = _k4_columns(R)
+    masks = ((dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw)
+    # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
+    # gives a non-unit result for a non-orthogonal R).
+    s = lax.rsqrt(_select(masks, [sum(x * x for x in col) for col in cols]))
+    s = jnp.where(_select(masks, [col[3] for col in cols]) < 0, -s, s)  # the w >= 0 hemisphere
+    q = jnp.stack([_select(masks, [col[c] for col in cols]) for c in range(4)], axis=0)
+    return jnp.moveaxis(q * s, 0, -1)
+
+
+@_shepperd.defjvp
+def _shepperd_jvp(primals, tangents):
+    # Tangent-space rule: with dR = R hat(v) on SO(3), dq = 1/2 q (x) (v, 0), v = vee(R^T dR).
+    # Off the tangent space, dR is projected onto it through R^T: at a rotation matrix this is
+    # the derivative of the nearest-rotation quaternion ("optimal"), and it costs about 40 flops
+    # against about 200 for differentiating the selection, the rsqrt and the transposition.
+    (R,), (dR,) = primals, tangents
+    q = _shepperd(R)
+
+    def rt_dr(i, j):  # (R^T dR)_ij
+        return sum(R[..., k, i] * dR[..., k, j] for k in range(3))
+
+    vx = 0.5 * (rt_dr(2, 1) - rt_dr(1, 2))
+    vy = 0.5 * (rt_dr(0, 2) - rt_dr(2, 0))
+    vz = 0.5 * (rt_dr(1, 0) - rt_dr(0, 1))
+    x, y, z, w = (q[..., i] for i in range(4))
+    dq = 0.5 * jnp.stack(
+        [
+            w * vx + y * vz - z * vy,
+            w * vy + z * vx - x * vz,
+            w * vz + x * vy - y * vx,
+            -(x * vx + y * vy + z * vz),
+        ],
+        axis=-1,
+    )
+    return q, dq
+
+
 def _unit(v):
     return v / jnp.sqrt(jnp.sum(v * v, axis=-1, keepdims=True))
 
@@ -72,8 +131,8 @@ def _matvec_k(cols, v):
 
 def _from_matrix(R, method: str):
     if method == "shepperd":
-        v, _ = _shepperd_column(R)
-    elif method == "markley":
+        return _shepperd(R)
+    if method == "markley":
         v, cols = _shepperd_column(R)
         # One power-iteration step with K = 4 q q^T (+ noise): its eigenvalues are 4, 0, 0, 0 for a
         # rotation, so one product removes the O(sigma) error of the column and leaves O(sigma^2).
@@ -116,9 +175,17 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
     Note:
         No sqrt or division is applied to a small number: the selected column has norm at least
         1 for a rotation matrix, so every method is finite and differentiable everywhere,
-        including the identity and every 180-degree rotation. The gradient is that of the
-        selected branch; the branches agree on rotation matrices, so on SO(3) it is the true
-        derivative. For ``"optimal"`` the gradient is that of ``eigh``, finite while the top
+        including the identity and every 180-degree rotation.
+
+        *Gradients.* For ``"shepperd"`` the derivative is the tangent-space rule
+        ``dq = 1/2 q (x) (v, 0)`` with ``v = vee(R^T dR)`` (a ``jax.custom_jvp``): exact for
+        every perturbation that stays on SO(3), and for a perturbation off SO(3) it keeps only
+        its component along the tangent space, which at a rotation matrix equals the derivative
+        of the ``"optimal"`` quaternion. So the gradient of a loss with respect to a free 3x3
+        matrix is not that of the raw Shepperd formula (which would also react to scaling and
+        shear); compose with an explicit projection if that is what you need. For
+        ``"markley"`` the gradient is that of the selected branch and the power step. For
+        ``"optimal"`` the gradient is that of ``eigh``, finite while the top
         eigenvalue is simple (always, for matrices near a rotation).
     """
     (R,), dt = as_float(R)

@@ -119,4 +119,11 @@ def public(fun):
     errors are raised eagerly and cost nothing on later calls.
     """
     params = inspect.signature(fun).parameters
-    return jax.jit(fun, static_argnames=[n for n in STATIC_ARGS if n in params])
+    # ``seq`` is static wherever it appears; the other names only as keyword options with a
+    # default (so an array argument that happens to be called ``axis`` stays traced).
+    static = [
+        n
+        for n, p in params.items()
+        if n in STATIC_ARGS and (n == "seq" or p.default is not inspect.Parameter.empty)
+    ]
+    return jax.jit(fun, static_argnames=static)

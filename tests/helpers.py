@@ -102,3 +102,71 @@ def euler_angles(draw, seq):
         lo, hi = (0.0, np.pi) if is_proper(seq) else (-np.pi / 2, np.pi / 2)
         mid = draw(st.floats(lo, hi))
     return np.array([a0, mid, a2])
+
+
+# --- high-precision references (mpmath) ----------------------------------------------------
+
+
+def mp_quat_to_matrix(q, dps=40):
+    """Rotation matrix of a (normalised) scalar-last quaternion, in mpmath; returns float64
+    rows of mpf values as a nested list."""
+    import mpmath as mp
+
+    with mp.workdps(dps):
+        x, y, z, w = (mp.mpf(float(c)) for c in q)
+        n = x * x + y * y + z * z + w * w
+        s = 2 / n
+        return [
+            [1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
+            [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
+            [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)],
+        ]
+
+
+def mp_euler_to_matrix(angles, seq, dps=40):
+    """Product of elementary rotation matrices in mpmath, for any sequence string."""
+    import mpmath as mp
+
+    from rotjax._euler import parse_seq
+
+    axes, intrinsic = parse_seq(seq)
+    with mp.workdps(dps):
+        mats = []
+        for ax, a in zip(axes, angles):
+            c, s = mp.cos(mp.mpf(float(a))), mp.sin(mp.mpf(float(a)))
+            m = mp.eye(3)
+            i, j = [(1, 2), (2, 0), (0, 1)][ax]
+            m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
+            mats.append(m)
+        out = mats[0] * mats[1] * mats[2] if intrinsic else mats[2] * mats[1] * mats[0]
+        return [[out[r, k] for k in range(3)] for r in range(3)]
+
+
+def mp_max_diff(a, b, dps=40):
+    """Max |a - b| over nested 3x3 lists of mpf / floats, as a float."""
+    import mpmath as mp
+
+    with mp.workdps(dps):
+        return float(max(abs(mp.mpf(a[r][k]) - mp.mpf(b[r][k])) for r in range(3) for k in range(3)))
+
+
+def mp_matrix_to_quaternion(R, dps=40):
+    """Quaternion (w >= 0) of the exact input matrix by the normalised largest column of K,
+    evaluated in mpmath (the exact-arithmetic value of the float algorithm's formula)."""
+    import mpmath as mp
+
+    with mp.workdps(dps):
+        r = [[mp.mpf(float(R[i][j])) for j in range(3)] for i in range(3)]
+        cols = [
+            [1 + r[0][0] - r[1][1] - r[2][2], r[0][1] + r[1][0], r[0][2] + r[2][0], r[2][1] - r[1][2]],
+            [r[0][1] + r[1][0], 1 - r[0][0] + r[1][1] - r[2][2], r[1][2] + r[2][1], r[0][2] - r[2][0]],
+            [r[0][2] + r[2][0], r[1][2] + r[2][1], 1 - r[0][0] - r[1][1] + r[2][2], r[1][0] - r[0][1]],
+            [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1], 1 + r[0][0] + r[1][1] + r[2][2]],
+        ]
+        best = max(range(4), key=lambda i: cols[i][i])
+        v = cols[best]
+        n = mp.sqrt(sum(c * c for c in v))
+        q = [c / n for c in v]
+        if q[3] < 0:
+            q = [-c for c in q]
+        return [float(c) for c in q], q

@@ -1,0 +1,508 @@
+"""Attitude fitting and learning: losses, 6D/9D representations, Wahba, mean, slerp."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import (
+    BATCH_SHAPES,
+    DTYPES,
+    assert_close,
+    assert_same_rotation,
+    fd_jacobian,
+    random_quaternions,
+    ulp,
+)
+from jax.test_util import check_grads
+from scipy.spatial.transform import Rotation, Slerp
+
+import rotjax as rj
+
+METHODS = ["svd", "q-method"]
+
+
+def random_rotations(n, seed=0):
+    return np.asarray(rj.quaternion_to_matrix(random_quaternions(n, seed)))
+
+
+def wahba_problem(n, seed, noise=0.01):
+    """Reference vectors ``a``, body vectors ``b = R0^T a + noise``, weights, and ``R0``."""
+    rng = np.random.default_rng(seed)
+    R0 = random_rotations(1, seed + 100)[0]
+    a = rng.normal(size=(n, 3))
+    b = a @ R0 + noise * rng.normal(size=(n, 3))
+    w = rng.uniform(0.2, 2.0, size=n)
+    return a, b, w, R0
+
+
+def scipy_align(a, b, w=None):
+    # scipy wants >= 2 pairs for a well-posed answer; our random problems always have them.
+    return Rotation.align_vectors(a, b, weights=w)[0].as_quat()
+
+
+def rotated_b(method):
+    """``R(a, b) @ b_0``: differentiable even where ``R`` itself is not unique."""
+
+    def f(a, b):
+        return rj.quaternion_apply(rj.align_vectors(a, b, method=method), b[0])
+
+    return f
+
+
+# --- geodesic and chordal distances -------------------------------------------------------
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_geodesic_matches_angle_between(dtype):
+    p, q = random_quaternions(50, 1), random_quaternions(50, 2)
+    Rp, Rq = rj.quaternion_to_matrix(p), rj.quaternion_to_matrix(q)
+    d = rj.geodesic_distance(Rp.astype(dtype), Rq.astype(dtype))
+    assert d.dtype == dtype
+    assert_close(d, rj.angle_between(p, q), atol=20 * ulp(dtype))
+
+
+@pytest.mark.parametrize("angle", [1e-9, 1e-4, 1.0, np.pi - 1e-4, np.pi - 1e-7])
+def test_geodesic_accurate_at_small_and_near_pi(angle):
+    axis = np.array([2.0, -3.0, 6.0]) / 7
+    R = rj.rotvec_to_matrix(angle * axis)
+    d = rj.geodesic_distance(np.eye(3), R)
+    assert_close(d, angle, atol=4 * ulp(np.float64))
+
+
+def test_geodesic_gradient_at_zero_is_finite_and_zero():
+    R = random_rotations(1, 3)[0]
+    g = jax.grad(rj.geodesic_distance, argnums=(0, 1))(jnp.asarray(R), jnp.asarray(R))
+    for gi in g:
+        assert_close(gi, np.zeros((3, 3)), atol=0)
+
+
+@pytest.mark.parametrize("angle", [1e-4, 0.5, np.pi - 1e-3])
+def test_geodesic_gradient_matches_fd(angle):
+    # Differentiate along the rotation: d/dt distance(I, exp(t v) R1) at t = 0 is the unit
+    # speed of the geodesic: +1 in the direction that lengthens it.
+    v = np.array([0.3, -0.2, 0.9])
+    R1 = rj.rotvec_to_matrix(angle * v / np.linalg.norm(v))
+
+    def f(x):
+        return rj.geodesic_distance(jnp.eye(3), rj.rotvec_to_matrix(x) @ R1)
+
+    x0 = np.zeros(3)
+    g = jax.grad(f)(x0)
+    assert_close(g, fd_jacobian(f, x0, h=1e-7), atol=2e-6)
+    assert_close(np.linalg.norm(g), 1.0, atol=1e-6)
+
+
+def test_geodesic_gradient_at_pi_is_finite():
+    R = rj.rotvec_to_matrix(np.pi * np.array([0.0, 0.6, 0.8]))
+    g = jax.grad(rj.geodesic_distance, argnums=1)(jnp.eye(3), R)
+    assert np.all(np.isfinite(g))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_chordal_distance(dtype):
+    p, q = random_quaternions(50, 4), random_quaternions(50, 5)
+    Rp = rj.quaternion_to_matrix(p).astype(dtype)
+    Rq = rj.quaternion_to_matrix(q).astype(dtype)
+    d = rj.chordal_distance(Rp, Rq)
+    assert d.dtype == dtype
+    theta = np.asarray(rj.angle_between(p, q))
+    assert_close(d, 2 * np.sqrt(2) * np.sin(theta / 2), atol=20 * ulp(dtype))
+    g = jax.grad(rj.chordal_distance)(Rp[0], Rp[0])
+    assert_close(g, np.zeros((3, 3)), atol=0)
+
+
+# --- 6D ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("shape", BATCH_SHAPES, ids=str)
+def test_sixd_round_trip(dtype, shape):
+    n = int(np.prod(shape))
+    R = random_rotations(n, 6).reshape(*shape, 3, 3).astype(dtype)
+    x = rj.matrix_to_sixd(R)
+    assert x.shape == (*shape, 6) and x.dtype == dtype
+    assert_close(rj.sixd_to_matrix(x), R, atol=10 * ulp(dtype))
+
+
+def test_sixd_gram_schmidt_is_a_projection():
+    x = np.random.default_rng(7).normal(size=(20, 6))
+    R = np.asarray(rj.sixd_to_matrix(x))
+    assert_close(R @ np.swapaxes(R, -1, -2), np.broadcast_to(np.eye(3), R.shape), atol=1e-14)
+    assert_close(np.linalg.det(R), np.ones(20), atol=1e-14)
+    # first column along a1; second in the plane of a1 and a2 on a2's side
+    a1, a2 = x[:, :3], x[:, 3:]
+    assert_close(R[:, :, 0], a1 / np.linalg.norm(a1, axis=-1, keepdims=True), atol=1e-15)
+    assert_close(np.einsum("ni,ni->n", np.cross(a1, a2), R[:, :, 1]), np.zeros(20), atol=1e-12)
+    assert np.all(np.einsum("ni,ni->n", a2, R[:, :, 1]) > 0)
+    # idempotent: re-encoding a Gram-Schmidt output gives the same matrix
+    assert_close(rj.sixd_to_matrix(rj.matrix_to_sixd(R)), R, atol=1e-14)
+
+
+def test_sixd_check_grads():
+    x = np.random.default_rng(8).normal(size=6)
+    check_grads(rj.sixd_to_matrix, (x,), order=1, modes=("fwd", "rev"))
+
+
+# --- 9D (SVD projection) --------------------------------------------------------------------
+
+# Singular values of M = R1 @ diag(s) @ R2: ties make jnp.linalg.svd's own gradient NaN.
+SPECTRA = {
+    "generic": [3.0, 2.0, 0.5],
+    "all_tied": [1.0, 1.0, 1.0],
+    "top_tied": [2.0, 2.0, 0.5],
+    "bottom_tied": [3.0, 1.0, 1.0],
+    "negative_det": [3.0, 2.0, -0.5],
+    "negative_det_top_tied": [2.0, 2.0, -0.5],
+}
+
+
+def spectral_matrix(s, seed):
+    R1, R2 = random_rotations(2, seed)
+    return R1 @ np.diag(s) @ R2
+
+
+def numpy_projection(M):
+    U, _, Vt = np.linalg.svd(M)
+    d = np.sign(np.linalg.det(U @ Vt))
+    return U @ np.diag([1.0, 1.0, d]) @ Vt
+
+
+@pytest.mark.parametrize("name", list(SPECTRA))
+def test_nined_projection_value(name):
+    M = spectral_matrix(SPECTRA[name], 9)
+    R = np.asarray(rj.nined_to_matrix(M.reshape(9)))
+    assert_close(R, numpy_projection(M), atol=1e-13)
+    assert_close(R @ R.T, np.eye(3), atol=1e-14)
+    assert_close(np.linalg.det(R), 1.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("name", list(SPECTRA))
+def test_nined_gradient_matches_fd_including_ties(name):
+    M = spectral_matrix(SPECTRA[name], 10).reshape(9)
+    J = jax.jacobian(rj.nined_to_matrix)(jnp.asarray(M))
+    assert_close(J, fd_jacobian(rj.nined_to_matrix, M, h=1e-6), atol=1e-8)
+
+
+def test_nined_check_grads():
+    M = spectral_matrix(SPECTRA["generic"], 11).reshape(9)
+    check_grads(rj.nined_to_matrix, (M,), order=1, modes=("fwd", "rev"))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("shape", BATCH_SHAPES, ids=str)
+def test_nined_round_trip_of_rotations(dtype, shape):
+    n = int(np.prod(shape))
+    R = random_rotations(n, 12).reshape(*shape, 3, 3).astype(dtype)
+    out = rj.nined_to_matrix(R.reshape(*shape, 9))
+    assert out.shape == (*shape, 3, 3) and out.dtype == dtype
+    assert_close(out, R, atol=20 * ulp(dtype))
+    # at a rotation (all singular values tied) the gradient is finite and is the projection
+    # onto the tangent space: tangent directions pass, normal (symmetric) ones are removed.
+    g = jax.grad(
+        lambda x: jnp.sum(rj.nined_to_matrix(x) ** 2 * np.arange(9, dtype=dtype).reshape(3, 3))
+    )
+    assert np.all(np.isfinite(g(R.reshape(*shape, 9)[(0,) * len(shape)])))
+
+
+def test_nined_gradient_finite_when_projection_not_unique():
+    # rank 1: every rotation about one axis is equally near
+    M = np.outer([1.0, 2.0, 0.5], [0.3, -1.0, 0.2]).reshape(9)
+    J = jax.jacobian(rj.nined_to_matrix)(jnp.asarray(M))
+    assert np.all(np.isfinite(J)) and np.abs(J).max() > 0
+
+
+# --- Wahba's problem --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("weighted", [False, True])
+@pytest.mark.parametrize("seed", range(4))
+def test_align_matches_scipy(method, weighted, seed):
+    a, b, w, _ = wahba_problem(8, seed, noise=0.2)
+    w = w if weighted else None
+    q = rj.align_vectors(a, b, w, method=method)
+    assert q[3] >= 0
+    assert_same_rotation(q, scipy_align(a, b, w), atol=1e-10)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_svd_and_q_method_agree(dtype):
+    rng = np.random.default_rng(13)
+    R0 = random_rotations(64, 14)
+    a = rng.normal(size=(64, 5, 3))
+    b = np.einsum("bni,bij->bnj", a, R0) + 0.3 * rng.normal(size=(64, 5, 3))
+    w = rng.uniform(0.1, 3.0, size=(64, 5))
+    args = (a.astype(dtype), b.astype(dtype), w.astype(dtype))
+    q_svd = rj.align_vectors(*args, method="svd")
+    q_dav = rj.align_vectors(*args, method="q-method")
+    assert q_svd.dtype == dtype and q_dav.dtype == dtype
+    assert_same_rotation(q_svd, q_dav, atol=2000 * ulp(dtype))
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("shape", BATCH_SHAPES, ids=str)
+def test_align_broadcasts_like_vmap(method, shape):
+    n = int(np.prod(shape))
+    rng = np.random.default_rng(15)
+    a = rng.normal(size=(n, 4, 3))
+    b = rng.normal(size=(n, 4, 3))
+    w = rng.uniform(0.5, 1.5, size=(n, 4))
+    looped = jax.vmap(lambda a, b, w: rj.align_vectors(a, b, w, method=method))(a, b, w)
+    batched = rj.align_vectors(
+        a.reshape(*shape, 4, 3), b.reshape(*shape, 4, 3), w.reshape(*shape, 4), method=method
+    )
+    assert batched.shape == (*shape, 4)
+    assert_close(batched.reshape(n, 4), looped, atol=1e-13)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_align_zero_weight_drops_a_pair(method):
+    a, b, w, _ = wahba_problem(6, 16, noise=0.3)
+    w[2] = 0.0
+    keep = np.arange(6) != 2
+    q_all = rj.align_vectors(a, b, w, method=method)
+    q_drop = rj.align_vectors(a[keep], b[keep], w[keep], method=method)
+    assert_close(q_all, q_drop, atol=1e-12)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_align_scalar_first(method):
+    a, b, w, _ = wahba_problem(5, 17)
+    q = rj.align_vectors(a, b, w, method=method)
+    assert_close(rj.align_vectors(a, b, w, method=method, scalar_first=True), np.roll(q, 1), atol=0)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_align_check_grads(method):
+    a, b, w, _ = wahba_problem(6, 18, noise=0.3)
+
+    def f(a, b, w):
+        return rj.align_vectors(a, b, w, method=method)
+
+    check_grads(f, (a, b, w), order=1, modes=("fwd", "rev"))
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_align_single_pair(method, dtype):
+    """One pair: R b is along a, and R is unique only up to a rotation about a."""
+    rng = np.random.default_rng(19)
+    a, b = rng.normal(size=(1, 3)), rng.normal(size=(1, 3))
+    q = rj.align_vectors(a.astype(dtype), b.astype(dtype), method=method)
+    Rb = np.asarray(rj.quaternion_apply(q, b[0].astype(dtype)))
+    assert_close(Rb / np.linalg.norm(b), a[0] / np.linalg.norm(a), atol=20 * ulp(dtype))
+    # the quaternion's own gradient is finite (zero along the undetermined rotation) ...
+    J = jax.jacobian(lambda a, b: rj.align_vectors(a, b, method=method), argnums=(0, 1))(
+        jnp.asarray(a, dtype), jnp.asarray(b, dtype)
+    )
+    assert all(np.all(np.isfinite(j)) for j in J)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_align_single_pair_gradient_of_rotated_vector(method):
+    # ... and the gradient of R b, which is uniquely defined (|b| a / |a|), is exact.
+    rng = np.random.default_rng(20)
+    a, b = rng.normal(size=(1, 3)), rng.normal(size=(1, 3))
+    f = rotated_b(method)
+    Ja, Jb = jax.jacobian(f, argnums=(0, 1))(jnp.asarray(a), jnp.asarray(b))
+    assert_close(Ja, fd_jacobian(lambda a: f(a, b), a), atol=1e-8)
+    assert_close(Jb, fd_jacobian(lambda b: f(a, b), b), atol=1e-8)
+    nb, na = np.linalg.norm(b), np.linalg.norm(a)
+    u = a[0] / na
+    assert_close(Ja[:, 0, :], nb / na * (np.eye(3) - np.outer(u, u)), atol=1e-10)
+
+
+NOISE_FREE_SETS = {
+    # three orthogonal pairs of +-axes: B = 2 R0, all singular values tied
+    "isotropic": np.concatenate([np.eye(3), -np.eye(3)]),
+    "two_vectors": np.array([[1.0, 0.2, -0.1], [0.1, 1.0, 0.5]]),
+    "generic": np.random.default_rng(21).normal(size=(6, 3)),
+}
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("name", list(NOISE_FREE_SETS))
+def test_align_noise_free(method, name):
+    """Exact data: the rotation is recovered to rounding and its gradient is exact."""
+    R0 = random_rotations(1, 22)[0]
+    a = NOISE_FREE_SETS[name]
+    b = a @ R0  # b_i = R0^T a_i
+    q = rj.align_vectors(a, b, method=method)
+    assert_close(rj.quaternion_to_matrix(q), R0, atol=1e-14)
+
+    def f(a):
+        return rj.align_vectors(a, b, method=method)
+
+    J = jax.jacobian(f)(jnp.asarray(a))
+    assert_close(J, fd_jacobian(f, a, h=1e-6), atol=1e-8)
+
+
+@pytest.mark.parametrize(
+    ("a_shape", "b_shape", "w_shape"),
+    [((3,), (3,), None), ((4, 2), (4, 2), None), ((4, 3), (5, 3), None), ((4, 3), (4, 3), (3,))],
+)
+def test_align_bad_shapes(a_shape, b_shape, w_shape):
+    w = None if w_shape is None else np.ones(w_shape)
+    with pytest.raises(ValueError, match="expected|same number"):
+        rj.align_vectors(np.ones(a_shape), np.ones(b_shape), w)
+
+
+def test_align_bad_method():
+    with pytest.raises(ValueError, match="method"):
+        rj.align_vectors(np.ones((2, 3)), np.ones((2, 3)), method="triad")
+
+
+# --- mean ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("flip", range(5))
+def test_mean_invariant_to_sign_flips(flip):
+    rng = np.random.default_rng(23)
+    q = random_quaternions(5, 24) * rng.uniform(0.5, 2.0, size=(5, 1))  # not unit, on purpose
+    w = rng.uniform(0.1, 1.0, size=5)
+    q_flip = q.copy()
+    q_flip[flip] *= -1
+    m = rj.quaternion_mean(q, w)
+    assert m[3] >= 0
+    assert_close(rj.quaternion_mean(q_flip, w), m, atol=1e-14)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_mean_about_one_axis_is_circular_mean(dtype):
+    # rotations about one axis: the mean angle is atan2(sum w sin t, sum w cos t)
+    axis = np.array([2.0, -3.0, 6.0]) / 7
+    t = np.array([0.1, 0.5, -0.3, 1.2])
+    w = np.array([1.0, 2.0, 0.5, 0.25])
+    q = rj.rotvec_to_quaternion((t[:, None] * axis).astype(dtype))
+    want = np.arctan2(np.sum(w * np.sin(t)), np.sum(w * np.cos(t)))
+    m = rj.quaternion_mean(q, w.astype(dtype))
+    assert m.dtype == dtype
+    assert_same_rotation(m, rj.rotvec_to_quaternion(want * axis), atol=20 * ulp(dtype))
+
+
+def test_mean_matches_scipy():
+    q = random_quaternions(10, 25)
+    w = np.random.default_rng(26).uniform(0.1, 1.0, 10)
+    assert_same_rotation(rj.quaternion_mean(q, w), Rotation.from_quat(q).mean(w).as_quat(), 1e-12)
+
+
+def test_mean_batched_and_scalar_first():
+    q = random_quaternions(12, 27).reshape(3, 4, 4)
+    m = rj.quaternion_mean(q)
+    assert m.shape == (3, 4)
+    assert_close(m, jax.vmap(rj.quaternion_mean)(q), atol=1e-14)
+    assert_close(rj.quaternion_mean(np.roll(q, 1, -1), scalar_first=True), np.roll(m, 1, -1), 1e-14)
+
+
+def test_mean_gradients():
+    q = random_quaternions(4, 28)
+    w = np.array([1.0, 0.5, 2.0, 0.7])
+    check_grads(rj.quaternion_mean, (q, w), order=1, modes=("fwd", "rev"))
+    # two rotations 180 degrees apart with equal weights: the mean is not unique
+    q2 = np.array([[0.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0]])
+    J = jax.jacobian(rj.quaternion_mean)(jnp.asarray(q2))
+    assert np.all(np.isfinite(J))
+
+
+def test_mean_bad_shapes():
+    with pytest.raises(ValueError, match="expected"):
+        rj.quaternion_mean(np.ones(4))
+    with pytest.raises(ValueError, match="expected"):
+        rj.quaternion_mean(np.ones((3, 4)), np.ones(2))
+
+
+# --- slerp -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_slerp_endpoints_and_scipy(dtype):
+    p, q = random_quaternions(20, 29), random_quaternions(20, 30)
+    p, q = p.astype(dtype), q.astype(dtype)
+    tol = 20 * ulp(dtype)
+    s0 = rj.slerp(p, q, np.zeros(20, dtype))
+    assert s0.dtype == dtype
+    assert_close(s0, p, atol=tol)
+    assert_same_rotation(rj.slerp(p, q, np.ones(20, dtype)), q, atol=tol)
+    t = np.linspace(0, 1, 20).astype(dtype)
+    want = [
+        Slerp([0, 1], Rotation.from_quat([pi, qi]))(ti).as_quat()
+        for pi, qi, ti in zip(p, q, t, strict=True)
+    ]
+    assert_same_rotation(rj.slerp(p, q, t), np.array(want), atol=50 * tol)
+
+
+def test_slerp_constant_angular_speed_and_short_way():
+    p = random_quaternions(1, 31)[0]
+    q = -random_quaternions(1, 32)[0]  # sign chosen so that p . q < 0 : the long way is wrong
+    if p @ q > 0:
+        q = -q
+    theta = float(rj.angle_between(p, q))
+    t = np.linspace(0.0, 1.0, 11)
+    path = rj.slerp(p, q, t)
+    assert_close(rj.angle_between(p, path), t * theta, atol=1e-14)
+    assert_close(rj.angle_between(path, q), (1 - t) * theta, atol=1e-14)
+    # equal steps: each consecutive pair is theta / 10 apart
+    assert_close(rj.angle_between(path[:-1], path[1:]), np.full(10, theta / 10), atol=1e-14)
+
+
+@pytest.mark.parametrize("gap", [0.0, 1e-12, 1e-7])
+def test_slerp_stable_as_p_approaches_q(gap):
+    p = random_quaternions(1, 33)[0]
+    q = np.asarray(rj.quaternion_multiply(p, rj.rotvec_to_quaternion([gap, -gap, 0.5 * gap])))
+
+    def f(p, q, t):
+        return rj.slerp(p, q, t)
+
+    out = f(p, q, 0.3)
+    theta = float(rj.angle_between(p, q))
+    assert_close(rj.angle_between(p, out), 0.3 * theta, atol=1e-15)
+    assert_close(rj.angle_between(out, q), 0.7 * theta, atol=1e-15)
+    for argnum, x in enumerate((p, q)):
+
+        def g(x, argnum=argnum):
+            args = [p, q, 0.3]
+            args[argnum] = x
+            return f(*args)
+
+        J = jax.jacobian(g)(jnp.asarray(x))
+        assert_close(J, fd_jacobian(g, x, h=1e-6), atol=1e-8)
+
+
+def test_slerp_antipodal_is_constant_path():
+    p = random_quaternions(1, 34)[0]
+    t = np.linspace(-0.5, 1.5, 9)
+    path = rj.slerp(p, -p, t)
+    assert_close(path, np.broadcast_to(p, (9, 4)), atol=1e-15)
+    J = jax.jacobian(rj.slerp, argnums=(0, 1, 2))(jnp.asarray(p), jnp.asarray(-p), 0.4)
+    assert all(np.all(np.isfinite(j)) for j in J)
+
+
+def test_slerp_t_broadcasts():
+    p, q = random_quaternions(2, 35)
+    t = np.linspace(0, 1, 7).reshape(7, 1)
+    out = rj.slerp(p, np.stack([q, p]), t)
+    assert out.shape == (7, 2, 4)
+    assert_close(out[:, 1], np.broadcast_to(p, (7, 4)), atol=1e-15)
+    check_grads(rj.slerp, (p, q, 0.3), order=1, modes=("fwd", "rev"))
+
+
+# --- shapes ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("fun", "args"),
+    [
+        (rj.geodesic_distance, (np.eye(3), np.ones((3, 4)))),
+        (rj.chordal_distance, (np.ones((2, 3)), np.eye(3))),
+        (rj.sixd_to_matrix, (np.ones(5),)),
+        (rj.matrix_to_sixd, (np.ones((3, 2)),)),
+        (rj.nined_to_matrix, (np.eye(3),)),
+        (rj.slerp, (np.ones(3), np.ones(4), 0.5)),
+    ],
+    ids=lambda x: getattr(x, "__name__", ""),
+)
+def test_bad_shapes_raise(fun, args):
+    with pytest.raises(ValueError, match="expected shape"):
+        fun(*args)

@@ -1,0 +1,590 @@
+"""Kinematics: Euler rate maps, quaternion/matrix derivatives, integration, Euler unwrapping.
+
+Every rate map is checked against autodiff of the core conversions (``jax.jvp`` of
+``euler_to_matrix``), which share no code with the closed forms in ``_kinematics``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import (
+    BATCH_SHAPES,
+    DIGIT_SEQS,
+    SEQS,
+    assert_close,
+    assert_same_rotation,
+    fd_jacobian,
+    is_proper,
+    lock_middles,
+)
+
+import rotjax as rj
+
+FRAMES = ["body", "world"]
+ALL_SEQS = SEQS + DIGIT_SEQS
+METHODS = ["exponential", "euler", "rk4"]
+
+
+def _rng(seed=0):
+    return np.random.default_rng(seed)
+
+
+def _omega_from_matrix_motion(R, R_dot, frame):
+    """Angular velocity from ``R`` and ``dR/dt`` in plain numpy (independent of rotjax)."""
+    R, R_dot = np.asarray(R), np.asarray(R_dot)
+    Rt = np.swapaxes(R, -1, -2)
+    W = Rt @ R_dot if frame == "body" else R_dot @ Rt
+    return 0.5 * np.stack(
+        [W[..., 2, 1] - W[..., 1, 2], W[..., 0, 2] - W[..., 2, 0], W[..., 1, 0] - W[..., 0, 1]],
+        axis=-1,
+    )
+
+
+def _generic_angles(seq, n, seed=0, margin=0.2):
+    """Angles of any size whose middle angle stays ``margin`` (in |cos| or |sin|) from lock."""
+    a = _rng(seed).uniform(-4.0, 4.0, size=(n, 3))
+    h = np.abs(np.sin(a[:, 1])) if is_proper(seq) else np.abs(np.cos(a[:, 1]))
+    a[h < margin, 1] += 0.7  # moves |cos| or |sin| well away from 0 for these samples
+    return a
+
+
+def _lock_angles(seq, seed=0):
+    """Angles exactly at both lock values of the middle angle (plus a 2 pi shifted copy)."""
+    lo, hi = lock_middles(seq)
+    a = _rng(seed).uniform(-np.pi, np.pi, size=(3, 3))
+    a[:, 1] = [lo, hi, lo + 2 * np.pi]
+    return a
+
+
+# --- Euler rate maps against autodiff ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("seq", ALL_SEQS)
+def test_rate_map_matches_autodiff(seq, frame):
+    a = jnp.asarray(_rng(1).uniform(-4.0, 4.0, size=(32, 3)))
+    rates = jnp.asarray(_rng(2).normal(size=(32, 3)))
+    R, R_dot = jax.jvp(lambda x: rj.euler_to_matrix(x, seq), (a,), (rates,))
+    want = _omega_from_matrix_motion(R, R_dot, frame)
+    assert_close(rj.euler_rates_to_angular_velocity(a, rates, seq, frame=frame), want, atol=1e-13)
+    E = rj.euler_rate_matrix(a, seq, frame=frame)
+    assert_close(np.einsum("nij,nj->ni", E, rates), want, atol=1e-13)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("seq", ALL_SEQS)
+def test_round_trips_away_from_lock(seq, frame):
+    a = jnp.asarray(_generic_angles(seq, 32, seed=3))
+    rates = jnp.asarray(_rng(4).normal(size=(32, 3)))
+    omega = rj.euler_rates_to_angular_velocity(a, rates, seq, frame=frame)
+    assert_close(rj.angular_velocity_to_euler_rates(a, omega, seq, frame=frame), rates, atol=1e-12)
+    w = jnp.asarray(_rng(5).normal(size=(32, 3)))
+    back = rj.euler_rates_to_angular_velocity(
+        a, rj.angular_velocity_to_euler_rates(a, w, seq, frame=frame), seq, frame=frame
+    )
+    assert_close(back, w, atol=1e-12)
+
+
+@pytest.mark.parametrize("seq", ["ZXZ", "zxz", "XYZ", "xyz", "yxy", "ZYX"])
+def test_frames_are_related_by_R(seq):
+    """omega_world = R @ omega_body, so E_world = R @ E_body."""
+    a = jnp.asarray(_rng(6).uniform(-3, 3, size=(8, 3)))
+    R = rj.euler_to_matrix(a, seq)
+    assert_close(
+        rj.euler_rate_matrix(a, seq, frame="world"),
+        R @ rj.euler_rate_matrix(a, seq, frame="body"),
+        atol=1e-14,
+    )
+
+
+# --- Nikravesh, Appendix A (seed 002) --------------------------------------------------------
+
+
+def _nikravesh(a):
+    """Eqs. A.3/A.4 (z-x-z) and A.7/A.8 (x-y-z, Bryant) in body axes, as correct closed forms.
+
+    A.3, A.4 and A.8 are correct as printed. A.7 is not: its (1, 1) entry reads
+    ``cos(phi1) cos(phi3)`` where the derivation (the first axis carried into body axes,
+    ``R_z(phi3)^T R_y(phi2)^T e_x``) gives ``cos(phi2) cos(phi3)``; with the printed entry A.8
+    is not its inverse. ``printed_a7`` keeps the printed entry to show the test can tell.
+    """
+    p, t, s = a  # psi, theta, sigma for z-x-z; phi1, phi2, phi3 for x-y-z
+    sin, cos = np.sin, np.cos
+    a3 = np.array(
+        [[sin(t) * sin(s), cos(s), 0], [sin(t) * cos(s), -sin(s), 0], [cos(t), 0, 1]]
+    )
+    a4 = (
+        np.array(
+            [
+                [sin(s), cos(s), 0],
+                [cos(s) * sin(t), -sin(s) * sin(t), 0],
+                [-sin(s) * cos(t), -cos(s) * cos(t), sin(t)],
+            ]
+        )
+        / sin(t)
+    )
+    a7 = np.array([[cos(t) * cos(s), sin(s), 0], [-cos(t) * sin(s), cos(s), 0], [sin(t), 0, 1]])
+    printed_a7 = a7.copy()
+    printed_a7[0, 0] = cos(p) * cos(s)
+    a8 = (
+        np.array(
+            [
+                [cos(s), -sin(s), 0],
+                [sin(s) * cos(t), cos(s) * cos(t), 0],
+                [-cos(s) * sin(t), sin(s) * sin(t), cos(t)],
+            ]
+        )
+        / cos(t)
+    )
+    return a3, a4, a7, printed_a7, a8
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_nikravesh_seed_matrices(seed):
+    a = _rng(seed).uniform(-3, 3, size=3)
+    a3, a4, a7, printed_a7, a8 = _nikravesh(a)
+    for seq in ("ZXZ", "313"):
+        assert_close(rj.euler_rate_matrix(a, seq), a3, atol=1e-15)
+        w = _rng(seed + 10).normal(size=3)
+        assert_close(rj.angular_velocity_to_euler_rates(a, w, seq), a4 @ w, atol=1e-13)
+    for seq in ("XYZ", "123"):
+        E = np.asarray(rj.euler_rate_matrix(a, seq))
+        assert_close(E, a7, atol=1e-15)
+        assert np.abs(E - printed_a7).max() > 1e-3  # the printed A.7 is wrong
+        w = _rng(seed + 20).normal(size=3)
+        assert_close(rj.angular_velocity_to_euler_rates(a, w, seq), a8 @ w, atol=1e-13)
+    assert_close(a4 @ a3, np.eye(3), atol=1e-12)
+    assert_close(a8 @ a7, np.eye(3), atol=1e-12)
+
+
+# --- singularity and damping -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seq", ALL_SEQS)
+def test_euler_singularity_is_abs_det(seq):
+    a = jnp.asarray(_rng(7).uniform(-4, 4, size=(16, 3)))
+    s = rj.euler_singularity(a, seq)
+    for frame in FRAMES:
+        assert_close(s, np.abs(np.linalg.det(rj.euler_rate_matrix(a, seq, frame=frame))), atol=1e-14)
+    assert_close(rj.euler_singularity(jnp.asarray(_lock_angles(seq)), seq), 0.0, atol=1e-15)
+
+
+def _damped_reference(E, omega, d):
+    Et = np.swapaxes(E, -1, -2)
+    lhs = Et @ E + d * d * np.eye(3)
+    return np.linalg.solve(lhs, (Et @ omega[..., None]))[..., 0]
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("seq", ALL_SEQS)
+def test_damped_inverse_exactly_at_lock(seq, frame):
+    a = jnp.asarray(_lock_angles(seq, seed=8))
+    w = jnp.asarray(_rng(9).normal(size=(3, 3)))
+    d = 0.1
+    got = rj.angular_velocity_to_euler_rates(a, w, seq, frame=frame, damping=d)
+    E = np.asarray(rj.euler_rate_matrix(a, seq, frame=frame))
+    assert_close(got, _damped_reference(E, np.asarray(w), d), atol=1e-12)
+
+    # Finite and correct gradients at lock, in angles, omega and the damping itself.
+    def f(x):
+        return rj.angular_velocity_to_euler_rates(x[:3], x[3:6], seq, frame=frame, damping=x[6])
+
+    for n in range(3):
+        x = jnp.concatenate([a[n], w[n], jnp.asarray([d])])
+        fwd, rev = jax.jacfwd(f)(x), jax.jacrev(f)(x)
+        fd = fd_jacobian(f, x, h=1e-6)
+        assert_close(fwd, fd, atol=1e-6)
+        assert_close(rev, fd, atol=1e-6)
+
+
+@pytest.mark.parametrize("seq", ["ZXZ", "zxz", "XYX", "yzy"])
+def test_exact_inverse_at_lock_is_non_finite(seq):
+    """Documented behaviour: with damping=0 the rates do not exist at lock (proper sequences at
+    a middle angle of exactly 0, where sin is exactly 0)."""
+    out = rj.angular_velocity_to_euler_rates(jnp.asarray([0.3, 0.0, -0.2]), jnp.ones(3), seq)
+    assert not np.all(np.isfinite(np.asarray(out)))
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("seq", ALL_SEQS)
+def test_damping_changes_answer_by_order_d2(seq, frame):
+    a = jnp.asarray(_generic_angles(seq, 16, seed=10, margin=0.3))
+    w = jnp.asarray(_rng(11).normal(size=(16, 3)))
+    exact = rj.angular_velocity_to_euler_rates(a, w, seq, frame=frame)
+    d = 1e-3
+    e1 = np.abs(rj.angular_velocity_to_euler_rates(a, w, seq, frame=frame, damping=d) - exact)
+    e2 = np.abs(rj.angular_velocity_to_euler_rates(a, w, seq, frame=frame, damping=2 * d) - exact)
+    n1, n2 = e1.max(axis=-1), e2.max(axis=-1)
+    assert np.all(n1 > 0)
+    np.testing.assert_allclose(n2 / n1, 4.0, rtol=1e-3)  # doubling d quadruples the change
+    assert np.all(n1 < 100 * d * d * np.abs(np.asarray(exact)).max(axis=-1))
+
+
+def test_damping_traced_inside_jit_switch():
+    """Switch damping on from euler_singularity inside a compiled function, near and at lock."""
+    seq = "XYZ"
+
+    @jax.jit
+    def rates(a, w):
+        d = jnp.where(rj.euler_singularity(a, seq) < 1e-2, 0.05, 0.0)
+        return rj.angular_velocity_to_euler_rates(a, w, seq, damping=d)
+
+    a = jnp.asarray([[0.2, np.pi / 2, 0.4], [0.2, 0.3, 0.4]])
+    w = jnp.asarray([[0.3, -1.0, 2.0], [0.3, -1.0, 2.0]])
+    out = rates(a, w)
+    assert_close(out[1], rj.angular_velocity_to_euler_rates(a[1], w[1], seq), atol=1e-15)
+    g = jax.grad(lambda x: rates(x, w).sum())(a)
+    assert np.all(np.isfinite(np.asarray(g)))
+    assert np.abs(np.asarray(out[0])).max() < 100
+
+
+# --- quaternion and matrix derivatives ---------------------------------------------------------
+
+
+def _quat_path(q0, omega, frame, t):
+    """q(t) for constant omega, built from core conversions: q0 * exp(omega t) or exp * q0."""
+    dq = rj.rotvec_to_quaternion(omega * t)
+    return rj.quaternion_multiply(q0, dq) if frame == "body" else rj.quaternion_multiply(dq, q0)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_quaternion_derivative(frame):
+    rng = _rng(12)
+    q = jnp.asarray(rng.normal(size=(16, 4)))  # deliberately not unit
+    w = jnp.asarray(rng.normal(size=(16, 3)))
+    qd = rj.quaternion_derivative(q, w, frame=frame)
+    assert_close(np.sum(np.asarray(qd) * np.asarray(q), axis=-1), 0.0, atol=1e-14)
+    assert_close(rj.quaternion_derivative_to_angular_velocity(q, qd, frame=frame), w, atol=1e-13)
+    # A radial component (norm change) of q_dot does not change the angular velocity.
+    qd_radial = qd + 0.37 * q
+    assert_close(
+        rj.quaternion_derivative_to_angular_velocity(q, qd_radial, frame=frame), w, atol=1e-13
+    )
+    # Finite differences of q(t) = q0 * exp(omega t) (body) or exp(omega t) * q0 (world).
+    h = 1e-6
+    fd = (_quat_path(q, w, frame, h) - _quat_path(q, w, frame, -h)) / (2 * h)
+    assert_close(qd, fd, atol=1e-8)
+    # Matches the matrix derivative: d/dt R(q(t)) = R hat(omega) (body) or hat(omega) R.
+    R, R_dot = jax.jvp(rj.quaternion_to_matrix, (q,), (qd,))
+    assert_close(rj.angular_velocity_to_matrix_derivative(R, w, frame=frame), R_dot, atol=1e-13)
+    assert_close(rj.matrix_derivative_to_angular_velocity(R, R_dot, frame=frame), w, atol=1e-13)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_quaternion_derivative_scalar_first(frame):
+    rng = _rng(13)
+    q = rng.normal(size=(5, 4))
+    w = rng.normal(size=(5, 3))
+    qd = np.asarray(rj.quaternion_derivative(q, w, frame=frame))
+    qf = np.roll(q, 1, axis=-1)
+    qdf = rj.quaternion_derivative(qf, w, frame=frame, scalar_first=True)
+    assert_close(qdf, np.roll(qd, 1, axis=-1), atol=1e-15)
+    back = rj.quaternion_derivative_to_angular_velocity(qf, qdf, frame=frame, scalar_first=True)
+    assert_close(back, w, atol=1e-13)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_matrix_derivative_of_euler_motion(frame):
+    a = jnp.asarray(_rng(14).uniform(-3, 3, size=(8, 3)))
+    rates = jnp.asarray(_rng(15).normal(size=(8, 3)))
+    R, R_dot = jax.jvp(lambda x: rj.euler_to_matrix(x, "zyx"), (a,), (rates,))
+    w = rj.matrix_derivative_to_angular_velocity(R, R_dot, frame=frame)
+    assert_close(w, _omega_from_matrix_motion(R, R_dot, frame), atol=1e-14)
+    assert_close(rj.angular_velocity_to_matrix_derivative(R, w, frame=frame), R_dot, atol=1e-13)
+
+
+# --- integration ---------------------------------------------------------------------------------
+
+
+def _propagate(q0, omegas, dt, frame, method):
+    def step(q, w):
+        q = rj.integrate_angular_velocity(q, w, dt, frame=frame, method=method)
+        return q, q
+
+    return jax.lax.scan(step, q0, omegas)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_exponential_exact_for_constant_omega(frame):
+    q0 = jnp.asarray(rj.quaternion_normalize(jnp.asarray([0.3, -0.2, 0.5, 0.8])))
+    w = jnp.asarray([1.3, -2.1, 0.4])
+    n, dt = 50, 0.07
+    q_end, _ = _propagate(q0, jnp.broadcast_to(w, (n, 3)), dt, frame, "exponential")
+    assert_same_rotation(q_end, _quat_path(q0, w, frame, n * dt), atol=1e-13)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_scan_over_gyro_log(frame):
+    """A time-varying gyro log: the scan equals the product of the per-sample exponentials."""
+    ts = np.arange(64) * 0.01
+    omegas = np.stack([np.sin(3 * ts), np.cos(2 * ts), 0.5 + ts], axis=-1)
+    q0 = jnp.asarray([0.0, 0.0, 0.0, 1.0])
+    q_end, traj = jax.jit(_propagate, static_argnames=("frame", "method"))(
+        q0, jnp.asarray(omegas), 0.01, frame, "exponential"
+    )
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    for w in omegas:
+        q = np.asarray(_quat_path(q, jnp.asarray(w), frame, 0.01))
+    assert_same_rotation(q_end, q, atol=1e-13)
+    assert traj.shape == (64, 4)
+    assert_close(np.linalg.norm(traj, axis=-1), 1.0, atol=1e-14)
+
+
+def _global_error(method, n, frame):
+    q0 = jnp.asarray(rj.quaternion_normalize(jnp.asarray([0.1, 0.2, 0.3, 0.9])))
+    w = jnp.asarray([1.0, -2.0, 0.7])
+    q_end, _ = _propagate(q0, jnp.broadcast_to(w, (n, 3)), 1.0 / n, frame, method)
+    return float(rj.angle_between(q_end, _quat_path(q0, w, frame, 1.0)))
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize(("method", "order"), [("euler", 2), ("rk4", 4)])
+def test_integration_order_by_halving_dt(method, order, frame):
+    """Global error over unit time shrinks by 2**order when dt halves.
+
+    The renormalised Euler step is first order as an ODE step, but with omega held over the step
+    it turns about the exact axis by 2 atan(|omega| dt / 2) = |omega| dt - O(dt^3): its attitude
+    error is second order (the norm drift, first order, is removed by the normalisation).
+    """
+    errs = np.array([_global_error(method, n, frame) for n in (16, 32, 64)])
+    ratios = errs[:-1] / errs[1:]
+    np.testing.assert_allclose(ratios, 2.0**order, rtol=0.03)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize(("method", "order"), [("euler", 3), ("rk4", 5)])
+def test_one_step_local_error_order(method, order, frame):
+    q0 = jnp.asarray(rj.quaternion_normalize(jnp.asarray([0.4, -0.1, 0.2, 0.7])))
+    w = jnp.asarray([0.9, 1.7, -1.1])
+    dts = jnp.asarray([0.04, 0.02, 0.01])
+    got = rj.integrate_angular_velocity(q0, w, dts, frame=frame, method=method)
+    want = rj.integrate_angular_velocity(q0, w, dts, frame=frame, method="exponential")
+    errs = np.asarray(rj.angle_between(got, want))
+    np.testing.assert_allclose(errs[:-1] / errs[1:], 2.0**order, rtol=0.03)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("method", METHODS)
+def test_integration_gradient_exact_at_zero_omega(method, frame):
+    q0 = jnp.asarray([0.3, -0.4, 0.1, 0.85])  # not unit
+    dt = 0.05
+
+    def f(w):
+        return rj.integrate_angular_velocity(q0, w, dt, frame=frame, method=method)
+
+    zero = jnp.zeros(3)
+    fd = fd_jacobian(f, zero, h=1e-5)
+    # Analytic: d q_next / d omega at 0 is dt/2 * q0 * (e_n, 0) (body) or (e_n, 0) * q0 (world),
+    # for the unit q0 (the output is normalised).
+    qn = q0 / jnp.linalg.norm(q0)
+    cols = []
+    for n in range(3):
+        e = jnp.zeros(4).at[n].set(1.0)
+        prod = rj.quaternion_multiply(qn, e) if frame == "body" else rj.quaternion_multiply(e, qn)
+        cols.append(0.5 * dt * np.asarray(prod))
+    analytic = np.stack(cols, axis=-1)
+    for jac in (jax.jacfwd(f)(zero), jax.jacrev(f)(zero)):
+        assert_close(jac, analytic, atol=1e-15)
+        assert_close(jac, fd, atol=1e-9)
+    assert_close(f(zero), qn, atol=1e-15)
+
+
+def test_integration_gradient_through_scan():
+    """Gradient of a loss after a scanned gyro log (with zero samples in it) matches FD."""
+    omegas = jnp.asarray(_rng(16).normal(size=(10, 3))).at[::3].set(0.0)
+    q0 = jnp.asarray([0.0, 0.0, 0.0, 1.0])
+    target = jnp.asarray([0.2, 0.1, -0.3, 0.9])
+
+    def loss(w):
+        q_end, _ = _propagate(q0, w, 0.1, "body", "exponential")
+        return jnp.sum(q_end * target) ** 2
+
+    g = jax.grad(loss)(omegas)
+    assert_close(g, fd_jacobian(loss, omegas, h=1e-6), atol=1e-8)
+
+
+# --- unwrapping -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seq", SEQS)
+def test_second_solution_set(seq):
+    """(a0 + pi, pi - a1, a2 + pi) for Tait-Bryan, (a0 + pi, -a1, a2 + pi) for proper; the
+    MapleSim seed's (a1 +- pi) and (a1 unchanged) are different rotations."""
+    a = _rng(17).uniform(-3, 3, size=(16, 3))
+    second = a + np.pi
+    second[:, 1] = -a[:, 1] if is_proper(seq) else np.pi - a[:, 1]
+    q1 = rj.euler_to_quaternion(a, seq)
+    assert_same_rotation(rj.euler_to_quaternion(second, seq), q1, atol=1e-14)
+    maplesim = a + np.pi
+    if is_proper(seq):
+        maplesim[:, 1] = a[:, 1]
+    q_m = np.asarray(rj.euler_to_quaternion(maplesim, seq))
+    dist = np.minimum(np.abs(q_m - q1).max(-1), np.abs(q_m + q1).max(-1))
+    assert np.all(dist > 1e-3)
+
+
+def _continuous_trajectory(seq, n=400):
+    """Outer angles that wrap several times, a middle angle that runs past its range edges."""
+    t = np.linspace(0.0, 1.0, n)
+    if is_proper(seq):
+        mid = np.pi / 2 + 2.2 * np.sin(2 * np.pi * t)  # crosses 0 and pi
+    else:
+        mid = 0.2 + 2.0 * np.sin(2 * np.pi * t)  # crosses +pi/2 and -pi/2
+    return np.stack([0.3 + 9.0 * t, mid, -0.5 - 11.0 * t + 3 * t * t], axis=-1)
+
+
+@pytest.mark.parametrize("seq", SEQS)
+def test_unwrap_recovers_continuous_angles(seq):
+    orig = np.stack([_continuous_trajectory(seq), _continuous_trajectory(seq)[::-1]], axis=1)
+    orig[:, 1] -= orig[0, 1]  # second trajectory: the same, reversed, starting at 0
+    principal = np.asarray(rj.quaternion_to_euler(rj.euler_to_quaternion(orig, seq), seq))
+    assert np.abs(np.diff(principal, axis=0)).max() > np.pi  # the input does jump
+    hi = np.pi if is_proper(seq) else np.pi / 2
+    assert orig[:, :, 1].max() > hi and orig[:, :, 1].min() < hi - np.pi  # both edges crossed
+    out = rj.unwrap_euler(principal, seq)
+    assert_close(out, orig, atol=1e-9)
+    # Another time axis gives the same result.
+    out1 = rj.unwrap_euler(np.swapaxes(principal, 0, 1), seq, axis=1)
+    assert_close(out1, np.swapaxes(orig, 0, 1), atol=1e-9)
+    out_neg = rj.unwrap_euler(principal, seq, axis=-3)
+    assert_close(out_neg, orig, atol=1e-9)
+
+
+@pytest.mark.parametrize("seq", ["ZYX", "zxz"])
+def test_unwrap_float32_and_same_rotations(seq):
+    orig = _continuous_trajectory(seq, n=300)
+    principal = rj.quaternion_to_euler(
+        rj.euler_to_quaternion(orig.astype(np.float32), seq), seq
+    )
+    out = rj.unwrap_euler(principal, seq)
+    assert out.dtype == jnp.float32
+    assert_close(out, orig, atol=2e-4)
+    assert_same_rotation(
+        rj.euler_to_quaternion(out, seq), rj.euler_to_quaternion(principal, seq), atol=1e-5
+    )
+
+
+def test_unwrap_single_sample_and_empty():
+    a = jnp.asarray([[0.1, 0.2, 0.3]])
+    assert_close(rj.unwrap_euler(a, "XYZ"), a, atol=0)
+    assert rj.unwrap_euler(jnp.zeros((0, 3)), "XYZ").shape == (0, 3)
+
+
+# --- jit / vmap / broadcasting / dtypes --------------------------------------------------------
+
+
+def _all_public(a, w, q, R):
+    """Every kinematics function on one set of inputs, as a dict of outputs."""
+    seq = "ZYX"
+    return {
+        "E": rj.euler_rate_matrix(a, seq, frame="world"),
+        "w": rj.euler_rates_to_angular_velocity(a, w, seq),
+        "r": rj.angular_velocity_to_euler_rates(a, w, seq, frame="world"),
+        "rd": rj.angular_velocity_to_euler_rates(a, w, seq, damping=0.1),
+        "s": rj.euler_singularity(a, seq),
+        "qd": rj.quaternion_derivative(q, w, frame="world"),
+        "wq": rj.quaternion_derivative_to_angular_velocity(q, rj.quaternion_derivative(q, w)),
+        "Rd": rj.angular_velocity_to_matrix_derivative(R, w),
+        "wR": rj.matrix_derivative_to_angular_velocity(R, R @ R),
+        "q1": rj.integrate_angular_velocity(q, w, 0.1, method="rk4"),
+        "q2": rj.integrate_angular_velocity(q, w, 0.1, frame="world"),
+        "q3": rj.integrate_angular_velocity(q, w, 0.1, method="euler"),
+    }
+
+
+def _inputs(shape, dtype=np.float64, seed=18):
+    rng = _rng(seed)
+    a = rng.uniform(-3, 3, size=(*shape, 3)).astype(dtype)
+    w = rng.normal(size=(*shape, 3)).astype(dtype)
+    q = rng.normal(size=(*shape, 4)).astype(dtype)
+    R = np.asarray(rj.quaternion_to_matrix(q))
+    return a, w, q, R
+
+
+@pytest.mark.parametrize("shape", BATCH_SHAPES, ids=str)
+def test_batch_vmap_jit_agree(shape):
+    a, w, q, R = _inputs((4, *shape))
+    batched = _all_public(a, w, q, R)
+    mapped = jax.vmap(_all_public)(a, w, q, R)
+    jitted = jax.jit(_all_public)(a, w, q, R)
+    for k, v in batched.items():
+        assert v.shape[: 1 + len(shape)] == (4, *shape), k
+        assert_close(mapped[k], v, atol=1e-13, err_msg=k)
+        assert_close(jitted[k], v, atol=1e-13, err_msg=k)
+    single = _all_public(a[0], w[0], q[0], R[0])
+    for k, v in single.items():
+        assert_close(v, batched[k][0], atol=1e-13, err_msg=k)
+
+
+def test_broadcasting_between_arguments():
+    a, w, q, R = _inputs((3, 1))
+    _, w2, _, _ = _inputs((1, 5), seed=19)
+    out = rj.euler_rates_to_angular_velocity(a, w2, "XZX")
+    full = rj.euler_rates_to_angular_velocity(
+        np.broadcast_to(a, (3, 5, 3)), np.broadcast_to(w2, (3, 5, 3)), "XZX"
+    )
+    assert out.shape == (3, 5, 3)
+    assert_close(out, full, atol=0)
+    d = np.array([0.0, 0.1, 0.2, 0.0, 0.5])  # per-sample damping broadcasts too
+    out = rj.angular_velocity_to_euler_rates(a, w2, "XZX", damping=d)
+    one = rj.angular_velocity_to_euler_rates(a[1, 0], w2[0, 2], "XZX", damping=0.2)
+    assert_close(out[1, 2], one, atol=1e-15)
+    assert rj.quaternion_derivative(q, w2).shape == (3, 5, 4)
+    dts = np.array([0.1, 0.2, 0.3])[:, None]
+    qn = rj.integrate_angular_velocity(q, w2, dts)
+    assert qn.shape == (3, 5, 4)
+    assert_close(qn[2, 1], rj.integrate_angular_velocity(q[2, 0], w2[0, 1], 0.3), atol=1e-15)
+
+
+def test_float32_preserved_and_accurate():
+    a, w, q, R = _inputs((6,), dtype=np.float32)
+    out32 = _all_public(a, w, q, R)
+    out64 = _all_public(*(x.astype(np.float64) for x in (a, w, q, R)))
+    for k, v in out32.items():
+        assert v.dtype == jnp.float32, k
+        scale = max(1.0, float(np.abs(np.asarray(out64[k])).max()))
+        assert_close(v, out64[k], atol=2e-5 * scale, err_msg=k)
+
+
+# --- validation -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: rj.euler_rate_matrix(np.zeros(3), "XYY"),
+        lambda: rj.euler_rate_matrix(np.zeros(3), "xYz"),
+        lambda: rj.euler_rate_matrix(np.zeros(3), "XYZ", frame="inertial"),
+        lambda: rj.euler_rate_matrix(np.zeros(4), "XYZ"),
+        lambda: rj.euler_rates_to_angular_velocity(np.zeros(3), np.zeros(2), "XYZ"),
+        lambda: rj.angular_velocity_to_euler_rates(np.zeros(3), np.zeros(3), "XYZ", frame="x"),
+        lambda: rj.angular_velocity_to_euler_rates(np.zeros(3), np.zeros(4), "XYZ"),
+        lambda: rj.euler_singularity(np.zeros(3), "ABC"),
+        lambda: rj.quaternion_derivative(np.zeros(4), np.zeros(3), frame="spatial"),
+        lambda: rj.quaternion_derivative(np.zeros(3), np.zeros(3)),
+        lambda: rj.quaternion_derivative_to_angular_velocity(np.zeros(4), np.zeros(3)),
+        lambda: rj.matrix_derivative_to_angular_velocity(np.eye(3), np.eye(3), frame="Body"),
+        lambda: rj.angular_velocity_to_matrix_derivative(np.eye(3), np.zeros(4)),
+        lambda: rj.integrate_angular_velocity(np.zeros(4), np.zeros(3), 0.1, method="rk2"),
+        lambda: rj.integrate_angular_velocity(np.zeros(4), np.zeros(3), 0.1, frame="fixed"),
+        lambda: rj.integrate_angular_velocity(np.zeros(3), np.zeros(3), 0.1),
+        lambda: rj.unwrap_euler(np.zeros((5, 3)), "XYZ", axis=1),
+        lambda: rj.unwrap_euler(np.zeros((5, 3)), "XYZ", axis=-1),
+        lambda: rj.unwrap_euler(np.zeros((5, 3)), "XYZ", axis=2),
+        lambda: rj.unwrap_euler(np.zeros((5, 2)), "XYZ"),
+        lambda: rj.unwrap_euler(np.zeros((5, 3)), "XXZ"),
+    ],
+)
+def test_invalid_arguments_raise(call):
+    with pytest.raises(ValueError):
+        call()
+
+
+def test_frame_error_lists_valid_values():
+    with pytest.raises(ValueError, match="body.*world"):
+        rj.euler_rate_matrix(np.zeros(3), "XYZ", frame="inertial")
+    with pytest.raises(ValueError, match="exponential.*euler.*rk4"):
+        rj.integrate_angular_velocity(np.zeros(4), np.zeros(3), 0.1, method="rk2")
