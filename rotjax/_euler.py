@@ -98,8 +98,6 @@ def _quat_to_euler(q, seq):
     else:
         a, b = q[..., 3] - q[..., j], q[..., i] + sign * q[..., k]
         c, d = q[..., j] + q[..., 3], sign * q[..., k] - q[..., i]
-    # NaN for the zero quaternion rather than a valid-looking rotation.
-    a = jnp.where(jnp.sum(q * q, axis=-1) == 0, jnp.nan, a)
     ab = jnp.stack([a, b], axis=-1)
     cd = jnp.stack([c, d], axis=-1)
     mid = 2 * safe_atan2(safe_norm(cd), safe_norm(ab))
@@ -121,7 +119,9 @@ def _quat_to_euler(q, seq):
         third = sign * third
         mid = mid - np.pi / 2
     out = (third, mid, first) if intrinsic else (first, mid, third)
-    return jnp.stack([wrap_angle(out[0]), out[1], wrap_angle(out[2])], axis=-1)
+    out = jnp.stack([wrap_angle(out[0]), out[1], wrap_angle(out[2])], axis=-1)
+    # NaN for the zero quaternion rather than a valid-looking rotation.
+    return jnp.where(jnp.sum(q * q, axis=-1, keepdims=True) == 0, jnp.nan, out)
 
 
 @public

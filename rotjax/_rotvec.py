@@ -175,8 +175,9 @@ def axis_angle_to_quaternion(axis, angle, degrees: bool = False, scalar_first: b
     check_shape(axis, (3,), "axis")
     if degrees:
         angle = jnp.deg2rad(angle)
-    n = axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True))
-    half = angle[..., None] / 2
+    batch = jnp.broadcast_shapes(axis.shape[:-1], angle.shape)
+    n = jnp.broadcast_to(axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True)), (*batch, 3))
+    half = jnp.broadcast_to(angle, batch)[..., None] / 2
     q = jnp.concatenate([jnp.sin(half) * n, jnp.cos(half)], axis=-1)
     return from_scalar_last(q, scalar_first).astype(dt)
 

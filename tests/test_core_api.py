@@ -1,0 +1,219 @@
+"""API contract: broadcasting, jit/vmap, dtypes, scalar_first, and bad input."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import BATCH_SHAPES, DTYPES, assert_close, assert_same_rotation, random_quaternions
+
+import rotjax as rj
+
+Q = random_quaternions(64, seed=21)
+R = np.asarray(rj.quaternion_to_matrix(Q))
+V = np.asarray(rj.quaternion_to_rotvec(Q))
+A = np.asarray(rj.quaternion_to_euler(Q, "ZYX"))
+
+# (function, positional inputs built from a flat batch of 64 rotations, trailing input ndims)
+UNARY = {
+    "quaternion_to_matrix": (rj.quaternion_to_matrix, Q, 1),
+    "matrix_to_quaternion": (rj.matrix_to_quaternion, R, 2),
+    "quaternion_to_rotvec": (rj.quaternion_to_rotvec, Q, 1),
+    "rotvec_to_quaternion": (rj.rotvec_to_quaternion, V, 1),
+    "rotvec_to_matrix": (rj.rotvec_to_matrix, V, 1),
+    "matrix_to_rotvec": (rj.matrix_to_rotvec, R, 2),
+    "quaternion_to_euler": (lambda x: rj.quaternion_to_euler(x, "ZYX"), Q, 1),
+    "matrix_to_euler": (lambda x: rj.matrix_to_euler(x, "zxz"), R, 2),
+    "euler_to_matrix": (lambda x: rj.euler_to_matrix(x, "ZYX"), A, 1),
+    "euler_to_quaternion": (lambda x: rj.euler_to_quaternion(x, "313"), A, 1),
+    "quaternion_normalize": (rj.quaternion_normalize, 3 * Q, 1),
+    "quaternion_conjugate": (rj.quaternion_conjugate, Q, 1),
+    "quaternion_inverse": (rj.quaternion_inverse, 2 * Q, 1),
+    "rotation_angle": (rj.rotation_angle, Q, 1),
+}
+BINARY = {
+    "quaternion_multiply": (rj.quaternion_multiply, Q, Q[::-1], 1, 1),
+    "relative_rotation": (rj.relative_rotation, Q, Q[::-1], 1, 1),
+    "angle_between": (rj.angle_between, Q, Q[::-1], 1, 1),
+    "quaternion_apply": (rj.quaternion_apply, Q, V, 1, 1),
+    "axis_angle_to_quaternion": (rj.axis_angle_to_quaternion, V, A[:, 0], 1, 0),
+}
+
+
+def _reshape(x, batch, trailing):
+    n = int(np.prod(batch)) if batch else 1
+    return x[:n].reshape(*batch, *x.shape[x.ndim - trailing :])
+
+
+def _flat(out, batch):
+    return jax.tree.map(lambda o: np.asarray(o).reshape(int(np.prod(batch, dtype=int)), *o.shape[len(batch) :]), out)
+
+
+@pytest.mark.parametrize("batch", BATCH_SHAPES, ids=str)
+@pytest.mark.parametrize("name", sorted(UNARY))
+def test_unary_batch_jit_vmap(name, batch):
+    f, x, nd = UNARY[name]
+    xb = _reshape(x, batch, nd)
+    out = f(xb)
+    ref = f(x)  # the flat batch
+    n = int(np.prod(batch, dtype=int))
+    jax.tree.map(lambda o, r: assert_close(np.asarray(o).reshape(n, *r.shape[1:]), r[:n], atol=1e-15), out, ref)
+    jax.tree.map(lambda o, j: assert_close(j, o, atol=1e-15), out, jax.jit(f)(xb))
+    if batch:
+        jax.tree.map(lambda o, v: assert_close(v, o, atol=1e-15), out, jax.vmap(f)(xb))
+
+
+@pytest.mark.parametrize("batch", BATCH_SHAPES, ids=str)
+@pytest.mark.parametrize("name", sorted(BINARY))
+def test_binary_broadcasting(name, batch):
+    f, x, y, ndx, ndy = BINARY[name]
+    xb = _reshape(x, batch, ndx)
+    y0 = y[:1].reshape(y.shape[1:])  # one unbatched second argument, broadcast
+    out = np.asarray(f(xb, y0))
+    n = int(np.prod(batch, dtype=int))
+    ref = np.asarray(f(x[:n], np.broadcast_to(y0, (n, *y0.shape))))
+    assert_close(out.reshape(n, *ref.shape[1:]), ref, atol=1e-15)
+    if batch:
+        yb = _reshape(y, batch, ndy)
+        assert_close(jax.vmap(f)(xb, yb), f(xb, yb), atol=1e-15)
+
+
+@pytest.mark.parametrize("dtype", DTYPES + [np.float16, jnp.bfloat16], ids=lambda d: jnp.dtype(d).name)
+@pytest.mark.parametrize("name", sorted(UNARY))
+def test_dtype_preserved(name, dtype):
+    f, x, _ = UNARY[name]
+    out = f(jnp.asarray(x[:4], dtype=dtype))
+    for o in jax.tree.leaves(out):
+        assert o.dtype == jnp.dtype(dtype)
+        assert np.all(np.isfinite(np.asarray(o, np.float64)))
+
+
+@pytest.mark.parametrize("name", ["quaternion_to_matrix", "quaternion_to_euler", "rotvec_to_matrix"])
+def test_integers_promote_to_float(name):
+    f, _, nd = UNARY[name]
+    x = np.zeros((2, 3) if nd == 1 and name != "quaternion_to_matrix" and name != "quaternion_to_euler" else (2, 4), int)
+    x[..., -1] = 1
+    out = f(x)
+    assert jnp.issubdtype(out.dtype, jnp.floating)
+
+
+def test_scalar_first_everywhere():
+    qf = np.roll(Q, 1, axis=-1)  # (w, x, y, z)
+    for name, f in [
+        ("quaternion_to_matrix", rj.quaternion_to_matrix),
+        ("quaternion_to_rotvec", rj.quaternion_to_rotvec),
+        ("quaternion_to_euler", lambda q, **k: rj.quaternion_to_euler(q, "XYZ", **k)),
+        ("rotation_angle", rj.rotation_angle),
+        ("quaternion_to_axis_angle", rj.quaternion_to_axis_angle),
+    ]:
+        jax.tree.map(lambda a, b: assert_close(a, b, atol=0, err_msg=name), f(qf, scalar_first=True), f(Q))
+    for name, f in [
+        ("quaternion_normalize", rj.quaternion_normalize),
+        ("quaternion_conjugate", rj.quaternion_conjugate),
+        ("quaternion_inverse", rj.quaternion_inverse),
+    ]:
+        assert_close(f(qf, scalar_first=True), np.roll(np.asarray(f(Q)), 1, -1), atol=0, err_msg=name)
+    for name, f in [
+        ("matrix_to_quaternion", lambda **k: rj.matrix_to_quaternion(R, **k)),
+        ("rotvec_to_quaternion", lambda **k: rj.rotvec_to_quaternion(V, **k)),
+        ("euler_to_quaternion", lambda **k: rj.euler_to_quaternion(A, "ZYX", **k)),
+        ("axis_angle_to_quaternion", lambda **k: rj.axis_angle_to_quaternion(V, A[:, 0], **k)),
+        ("quaternion_multiply", lambda **k: rj.quaternion_multiply(
+            Q if not k else qf, Q[::-1] if not k else qf[::-1], **k)),
+        ("relative_rotation", lambda **k: rj.relative_rotation(
+            Q if not k else qf, Q[::-1] if not k else qf[::-1], **k)),
+    ]:
+        assert_close(f(scalar_first=True), np.roll(np.asarray(f()), 1, -1), atol=0, err_msg=name)
+    assert_close(rj.quaternion_apply(qf, V, scalar_first=True), rj.quaternion_apply(Q, V), atol=0)
+    assert_close(rj.angle_between(qf, qf[::-1], scalar_first=True), rj.angle_between(Q, Q[::-1]), atol=0)
+
+
+def test_degrees_option():
+    assert_close(rj.euler_to_matrix(np.rad2deg(A), "ZYX", degrees=True), rj.euler_to_matrix(A, "ZYX"), atol=1e-15)
+    assert_close(rj.quaternion_to_euler(Q, "ZYX", degrees=True), np.rad2deg(A), atol=1e-12)
+    assert_close(rj.matrix_to_euler(R, "ZYX", degrees=True), np.rad2deg(A), atol=1e-12)
+    assert_close(rj.rotvec_to_quaternion(np.rad2deg(V), degrees=True), rj.rotvec_to_quaternion(V), atol=1e-15)
+    assert_close(rj.quaternion_to_rotvec(Q, degrees=True), np.rad2deg(V), atol=1e-12)
+
+
+def test_algebra_identities():
+    p, q = Q[:32], Q[32:]
+    pq = rj.quaternion_multiply(p, q)
+    assert_close(rj.quaternion_to_matrix(pq), rj.quaternion_to_matrix(p) @ rj.quaternion_to_matrix(q), atol=1e-15)
+    ident = rj.quaternion_multiply(3 * q, rj.quaternion_inverse(3 * q))
+    assert_close(ident, np.broadcast_to([0, 0, 0, 1.0], ident.shape), atol=1e-15)
+    v = V[:32]
+    assert_close(rj.quaternion_apply(2 * p, v), np.einsum("nij,nj->ni", rj.quaternion_to_matrix(p), v), atol=1e-14)
+    assert_close(rj.quaternion_normalize(5 * p), p, atol=1e-15)
+    assert_close(rj.angle_between(p, -p), 0, atol=1e-15)
+    assert_close(rj.angle_between(p, q), rj.rotation_angle(rj.relative_rotation(p, q)), atol=1e-14)
+    assert_close(rj.rotation_angle(p), np.linalg.norm(rj.quaternion_to_rotvec(p), axis=-1), atol=1e-14)
+    axis, angle = rj.quaternion_to_axis_angle(p)
+    assert_same_rotation(rj.axis_angle_to_quaternion(axis, angle), p, atol=1e-15)
+
+
+def test_non_unit_quaternions_are_normalised():
+    for scale in [1e-150, 1e-3, 7.0, 1e150]:
+        s = scale * Q
+        assert_close(rj.quaternion_to_matrix(s), R, atol=1e-15)
+        assert_close(rj.quaternion_to_euler(s, "XYZ"), rj.quaternion_to_euler(Q, "XYZ"), atol=1e-14)
+        assert_close(rj.quaternion_to_rotvec(s), V, atol=1e-14)
+        assert_close(rj.rotation_angle(s), rj.rotation_angle(Q), atol=1e-15)
+
+
+# --- bad input --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seq", ["xyx ", "XYx", "XXY", "xyy", "abc", "12", "1234", "313a", "113", "404", "", 123])
+def test_bad_sequence_raises_listing_valid_forms(seq):
+    with pytest.raises(ValueError, match="uppercase for intrinsic") as info:
+        rj.euler_to_matrix(A, seq)
+    assert "313" in str(info.value)
+    with pytest.raises(ValueError, match="invalid Euler sequence"):
+        rj.quaternion_to_euler(Q, seq)
+
+
+@pytest.mark.parametrize(
+    "f,x,expected",
+    [
+        (rj.quaternion_to_matrix, np.zeros((5, 3)), r"\(\.\.\., 4\), got \(5, 3\)"),
+        (rj.matrix_to_quaternion, np.zeros((5, 3, 4)), r"\(\.\.\., 3, 3\), got \(5, 3, 4\)"),
+        (rj.rotvec_to_matrix, np.zeros((4,)), r"\(\.\.\., 3\), got \(4,\)"),
+        (lambda x: rj.euler_to_matrix(x, "XYZ"), np.zeros((2, 2)), r"\(\.\.\., 3\), got \(2, 2\)"),
+        (lambda x: rj.matrix_to_euler(x, "XYZ"), np.zeros((3,)), r"\(\.\.\., 3, 3\), got \(3,\)"),
+        (lambda x: rj.quaternion_apply(x, np.zeros(4)), np.zeros(4), r"v: expected shape \(\.\.\., 3\)"),
+    ],
+)
+def test_wrong_shape_raises_with_both_shapes(f, x, expected):
+    with pytest.raises(ValueError, match=expected):
+        f(x)
+    with pytest.raises(ValueError, match=expected):
+        jax.jit(f)(x)
+
+
+def test_bad_method_raises():
+    with pytest.raises(ValueError, match="shepperd"):
+        rj.matrix_to_quaternion(R, method="fast")
+
+
+def test_nan_stays_in_its_batch_element():
+    q = Q[:8].copy()
+    q[3, 1] = np.nan
+    for f in [rj.quaternion_to_matrix, rj.quaternion_to_rotvec, rj.rotation_angle,
+              lambda x: rj.quaternion_to_euler(x, "ZXZ")]:  # fmt: skip
+        out = np.asarray(f(q)).reshape(8, -1)
+        assert np.all(np.isnan(out[3])) and np.all(np.isfinite(np.delete(out, 3, 0)))
+    Rn = R[:8].copy()
+    Rn[5, 2, 2] = np.nan
+    for f in [rj.matrix_to_quaternion, rj.matrix_to_rotvec, lambda x: rj.matrix_to_euler(x, "XYZ")]:
+        out = np.asarray(f(Rn)).reshape(8, -1)
+        assert np.any(np.isnan(out[5])) and np.all(np.isfinite(np.delete(out, 5, 0)))
+
+
+def test_zero_quaternion_gives_nan():
+    z = np.zeros(4)
+    for f in [rj.quaternion_to_matrix, rj.quaternion_to_rotvec, rj.rotation_angle, rj.quaternion_normalize,
+              lambda x: rj.quaternion_to_euler(x, "XYZ"), lambda x: rj.quaternion_to_euler(x, "ZXZ"),
+              lambda x: rj.quaternion_apply(x, np.ones(3))]:  # fmt: skip
+        assert np.all(np.isnan(np.asarray(f(z))))
+    axis, angle = rj.quaternion_to_axis_angle(z)
+    assert np.all(np.isnan(axis)) and np.isnan(angle)
