@@ -100,9 +100,12 @@ def _shepperd_jvp(primals, tangents):
     # against about 200 for differentiating the selection, the rsqrt and the transposition.
     (R,), (dR,) = primals, tangents
     q = _shepperd(R)
+    # jnp.split (not indexing) so that reverse mode transposes it to one concatenate rather
+    # than nine pads of a zero (..., 3, 3) array.
+    d = [c[..., 0] for c in jnp.split(dR.reshape(*dR.shape[:-2], 9), 9, axis=-1)]
 
     def rt_dr(i, j):  # (R^T dR)_ij
-        return sum(R[..., k, i] * dR[..., k, j] for k in range(3))
+        return sum(R[..., k, i] * d[3 * k + j] for k in range(3))
 
     vx = 0.5 * (rt_dr(2, 1) - rt_dr(1, 2))
     vy = 0.5 * (rt_dr(0, 2) - rt_dr(2, 0))
@@ -129,6 +132,26 @@ def _matvec_k(cols, v):
     return sum(jnp.stack(cols[i], axis=-1) * v[..., i : i + 1] for i in range(4))
 
 
+@jax.custom_jvp
+def _top_eigenvector(K):
+    """Unit eigenvector of the largest eigenvalue of the symmetric ``(..., 4, 4)`` matrix ``K``."""
+    return jnp.linalg.eigh(K)[1][..., :, 3]
+
+
+@_top_eigenvector.defjvp
+def _top_eigenvector_jvp(primals, tangents):
+    # First-order perturbation of one eigenvector: dv = sum_j v_j (v_j . dK v) / (lam - lam_j).
+    # Only the gaps to the top eigenvalue appear. eigh's own derivative divides by the gaps
+    # between *all* eigenvalues, and the three lower ones of K are equal (0, 0, 0) for an exact
+    # rotation, so it returns NaN there (e.g. at the identity).
+    (K,), (dK,) = primals, tangents
+    lam, vecs = jnp.linalg.eigh(K)
+    v, low = vecs[..., :, 3], vecs[..., :, :3]
+    dKv = jnp.sum(dK * v[..., None, :], axis=-1)
+    coef = jnp.sum(low * dKv[..., :, None], axis=-2) / (lam[..., 3:] - lam[..., :3])
+    return v, jnp.sum(low * coef[..., None, :], axis=-1)
+
+
 def _from_matrix(R, method: str):
     if method == "shepperd":
         return _shepperd(R)
@@ -142,8 +165,7 @@ def _from_matrix(R, method: str):
         K = jnp.stack([jnp.stack(c, axis=-1) for c in cols], axis=-1)
         # Bar-Itzhack 2000: the top eigenvector of the symmetric K is the quaternion of the
         # rotation nearest to R in the Frobenius norm.
-        _, vecs = jnp.linalg.eigh(K)
-        v = vecs[..., :, 3]
+        v = _top_eigenvector(K)
     else:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     return _positive_w(_unit(v))

@@ -1,0 +1,258 @@
+"""Gradients: check_grads at generic points, and named regression tests at every singular point
+(identity, 180 degrees, zero rotation vector, gimbal lock of every sequence)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import SEQS, angle_diff, assert_close, is_proper, random_quaternions
+from jax.test_util import check_grads
+
+import rotjax as rj
+from rotjax._euler import parse_seq
+from rotjax._numerics import hat
+
+Q = random_quaternions(3, seed=31)
+OMEGAS = np.array([[1.0, 0, 0], [0, 1, 0], [0, 0, 1], [0.3, -0.7, 0.2]])
+GENERIC = {
+    "quaternion_to_matrix": (rj.quaternion_to_matrix, Q[0]),
+    "matrix_to_quaternion_optimal": (lambda R: rj.matrix_to_quaternion(R, method="optimal"),
+                                     np.asarray(rj.quaternion_to_matrix(Q[1]))),  # fmt: skip
+    "rotvec_to_quaternion": (rj.rotvec_to_quaternion, np.array([0.3, -1.2, 0.7])),
+    "quaternion_to_rotvec": (rj.quaternion_to_rotvec, Q[2]),
+    "rotvec_to_matrix": (rj.rotvec_to_matrix, np.array([0.3, -1.2, 0.7])),
+    "rotation_angle": (rj.rotation_angle, Q[0]),
+    "angle_between": (lambda q: rj.angle_between(Q[1], q), Q[0]),
+    "quaternion_apply": (lambda q: rj.quaternion_apply(q, np.array([1.0, 2.0, 3.0])), Q[0]),
+    "quaternion_multiply": (lambda q: rj.quaternion_multiply(q, Q[1]), Q[0]),
+    "relative_rotation": (lambda q: rj.relative_rotation(q, Q[1]), Q[0]),
+    "quaternion_inverse": (rj.quaternion_inverse, Q[0]),
+    "axis_angle_to_quaternion": (lambda a: rj.axis_angle_to_quaternion(a, 0.7), np.array([1.0, 2, 3])),
+    "quaternion_to_axis_angle": (rj.quaternion_to_axis_angle, Q[2]),
+}
+
+
+# Functions of a matrix are checked along tangent directions of SO(3) below: off SO(3) their
+# derivative is defined by the rotation (see matrix_to_quaternion), not by ambient FD.
+
+
+@pytest.mark.parametrize("name", sorted(GENERIC))
+def test_check_grads_generic(name):
+    f, x = GENERIC[name]
+    check_grads(f, (x,), order=1, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
+
+
+@pytest.mark.parametrize("seq", SEQS)
+def test_check_grads_euler_generic(seq):
+    a = np.array([0.4, 1.1 if is_proper(seq) else 0.6, -2.0])
+    check_grads(lambda x: rj.euler_to_matrix(x, seq), (a,), 1, modes=("fwd", "rev"))
+    check_grads(lambda x: rj.euler_to_quaternion(x, seq), (a,), 1, modes=("fwd", "rev"))
+    q = np.asarray(rj.euler_to_quaternion(a, seq))
+    check_grads(lambda x: rj.quaternion_to_euler(x, seq), (q,), 1, modes=("fwd", "rev"))
+    R = np.asarray(rj.euler_to_matrix(a, seq))
+    for omega in OMEGAS:  # d angles along R omega^ equals the rate-map answer, by FD
+        dR = R @ np.asarray(hat(omega))
+        _, jvp = jax.jvp(lambda m: rj.matrix_to_euler(m, seq), (jnp.asarray(R),), (jnp.asarray(dR),))
+        h = 1e-6
+        fd = angle_diff(rj.matrix_to_euler(R @ np.asarray(rj.rotvec_to_matrix(h * omega)), seq),
+                        rj.matrix_to_euler(R @ np.asarray(rj.rotvec_to_matrix(-h * omega)), seq)) / (2 * h)  # fmt: skip
+        assert_close(jvp, fd, atol=1e-7)
+
+
+# --- exact derivatives at the identity / zero rotation vector --------------------------------
+
+
+def test_rotvec_to_quaternion_jacobian_at_zero_is_half_identity():
+    J = np.asarray(jax.jacfwd(rj.rotvec_to_quaternion)(jnp.zeros(3)))
+    np.testing.assert_array_equal(J, np.vstack([0.5 * np.eye(3), np.zeros((1, 3))]))
+    Jr = np.asarray(jax.jacrev(rj.rotvec_to_quaternion)(jnp.zeros(3)))
+    np.testing.assert_array_equal(Jr, J)
+
+
+def test_log_map_jacobian_at_identity_is_two_identity():
+    J = np.asarray(jax.jacfwd(rj.quaternion_to_rotvec)(jnp.array([0.0, 0, 0, 1])))
+    np.testing.assert_array_equal(J, np.hstack([2 * np.eye(3), np.zeros((3, 1))]))
+    Jr = np.asarray(jax.jacrev(rj.quaternion_to_rotvec)(jnp.array([0.0, 0, 0, 1])))
+    np.testing.assert_array_equal(Jr, J)
+
+
+def test_rotvec_to_matrix_jacobian_at_zero_is_hat():
+    J = np.asarray(jax.jacfwd(rj.rotvec_to_matrix)(jnp.zeros(3)))
+    for k in range(3):
+        np.testing.assert_array_equal(J[..., k], np.asarray(hat(jnp.eye(3)[k])))
+
+
+@pytest.mark.parametrize("scale", [1e-9, 1e-5, 1e-2])
+def test_exp_log_near_zero_match_finite_differences(scale):
+    """Where the Taylor branch meets the closed form the derivatives agree with FD."""
+    v = scale * np.array([0.3, -0.5, 0.8])
+    check_grads(rj.rotvec_to_quaternion, (v,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
+    check_grads(rj.rotvec_to_matrix, (v,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
+    q = np.asarray(rj.rotvec_to_quaternion(v))
+    check_grads(rj.quaternion_to_rotvec, (q,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
+
+
+def test_quaternion_to_matrix_grads_at_identity_and_180():
+    for q in [np.array([0.0, 0, 0, 1]), np.array([1.0, 0, 0, 0]), np.array([0.0, 0.6, 0.8, 0])]:
+        check_grads(rj.quaternion_to_matrix, (q,), 2, modes=("fwd", "rev"))
+
+
+# --- matrix -> quaternion on SO(3): tangent directions ---------------------------------------
+
+SPECIAL_MATRICES = {
+    "identity": np.eye(3),
+    "180_x": np.diag([1.0, -1, -1]),
+    "180_y": np.diag([-1.0, 1, -1]),
+    "180_z": np.diag([-1.0, -1, 1]),
+    "180_generic": np.asarray(rj.rotvec_to_matrix(np.pi * np.array([2.0, -3, 6]) / 7)),
+    "tie_120": np.array([[0.0, 0, 1], [1, 0, 0], [0, 1, 0]]),  # all |q_i| = 1/2
+    "generic": np.asarray(rj.quaternion_to_matrix(Q[1])),
+}
+
+
+def _aligned_fd(f, R, omega, h=1e-6):
+    """Central difference of f(R exp(t omega^)) at t=0, each sample sign-aligned to f(R)."""
+    f0 = np.asarray(f(R))
+    out = []
+    for t in (h, -h):
+        ft = np.asarray(f(R @ np.asarray(rj.rotvec_to_matrix(t * omega))))
+        out.append(ft if np.dot(ft, f0) >= 0 else -ft)
+    return (out[0] - out[1]) / (2 * h)
+
+
+@pytest.mark.parametrize("method", ["shepperd", "markley", "optimal"])
+@pytest.mark.parametrize("name", sorted(SPECIAL_MATRICES))
+def test_matrix_to_quaternion_tangent_derivative(name, method):
+    R = SPECIAL_MATRICES[name]
+    f = lambda m: rj.matrix_to_quaternion(m, method=method)  # noqa: E731
+    for omega in OMEGAS:
+        _, jvp = jax.jvp(f, (jnp.asarray(R),), (jnp.asarray(R @ np.asarray(hat(omega))),))
+        q = np.asarray(f(R))
+        # exact tangent identity dq = q (x) (omega/2, 0) for a unit q
+        expected = np.asarray(rj.quaternion_multiply(q, np.array([*(omega / 2), 0.0])))
+        assert_close(jvp, expected, atol=1e-9, err_msg=f"omega={omega}")
+        assert_close(jvp, _aligned_fd(f, R, omega), atol=1e-7, err_msg=f"omega={omega}")
+        g = jax.grad(lambda m: jnp.dot(f(m), jnp.asarray(expected)))(jnp.asarray(R))
+        assert np.all(np.isfinite(g)) and np.abs(g).max() > 0
+
+
+@pytest.mark.parametrize("name", sorted(SPECIAL_MATRICES))
+def test_matrix_to_rotvec_tangent_derivative(name):
+    """exp(log(R)) = R on SO(3), so the derivative of the composition along R omega^ returns
+    R omega^; at the identity d log = omega exactly."""
+    R = SPECIAL_MATRICES[name]
+    for omega in OMEGAS:
+        dR = R @ np.asarray(hat(omega))
+        _, jvp = jax.jvp(lambda m: rj.rotvec_to_matrix(rj.matrix_to_rotvec(m)), (jnp.asarray(R),), (jnp.asarray(dR),))
+        assert_close(jvp, dR, atol=1e-12)
+        if name == "identity":
+            _, d = jax.jvp(rj.matrix_to_rotvec, (jnp.asarray(R),), (jnp.asarray(dR),))
+            assert_close(d, omega, atol=1e-15)
+
+
+@pytest.mark.parametrize("q", [np.array([1.0, 0, 0, 0]), np.array([0.0, 0.6, 0.8, 0]), np.array([0.6, 0, 0.8, 1e-12])])
+def test_log_map_derivative_at_180_is_the_branch_derivative(q):
+    """At 180 degrees the log has a cut; the gradient is that of the w >= 0 branch, so
+    exp(log(q)) reproduces dR exactly."""
+    for dq in np.eye(4):
+        _, lhs = jax.jvp(lambda x: rj.rotvec_to_matrix(rj.quaternion_to_rotvec(x)), (q,), (dq,))
+        _, rhs = jax.jvp(rj.quaternion_to_matrix, (q,), (dq,))
+        assert_close(lhs, rhs, atol=1e-10)
+
+
+# --- angles: finite and correct at 0 ---------------------------------------------------------
+
+
+def test_rotation_angle_gradient_at_identity_and_near_it():
+    ident = jnp.array([0.0, 0, 0, 1])
+    g = np.asarray(jax.grad(rj.rotation_angle)(ident))
+    np.testing.assert_array_equal(g, np.zeros(4))  # cone minimum: minimum-norm subgradient
+    g2 = np.asarray(jax.grad(lambda q: rj.rotation_angle(q) ** 2)(ident))
+    np.testing.assert_array_equal(g2, np.zeros(4))  # smooth loss: true derivative 0
+    for t in [1e-12, 1e-6]:
+        q = np.array([np.sin(t / 2), 0, 0, np.cos(t / 2)])
+        g = np.asarray(jax.grad(rj.rotation_angle)(q))
+        assert_close(g, [2 * np.cos(t / 2), 0, 0, -2 * np.sin(t / 2)], atol=1e-12)  # not silently 0
+        gb = np.asarray(jax.grad(lambda p: rj.angle_between(p, q))(jnp.array([0.0, 0, 0, 1])))
+        assert_close(np.abs(gb[0]), 2 * np.cos(t / 2), atol=1e-12)
+
+
+# --- Euler angles at and near gimbal lock ----------------------------------------------------
+
+
+def _exact_lock_quaternion(seq, mid_index):
+    """An exactly representable quaternion at gimbal lock: products of unnormalised elementary
+    quaternions (tan(a/2) e_i, 1) with small dyadic entries."""
+    axes, intrinsic = parse_seq(seq)
+    lock_mid = [(0.0, 1.0), (1.0, 0.0)] if is_proper(seq) else [(1.0, 1.0), (-1.0, 1.0)]
+    s, c = lock_mid[mid_index]  # unnormalised (sin, cos) of half the middle angle
+
+    def elem(ax, s, c):
+        e = np.zeros(4)
+        e[ax], e[3] = s, c
+        return e
+
+    parts = [elem(axes[0], 0.5, 1.0), elem(axes[1], s, c), elem(axes[2], -0.25, 1.0)]
+    mult = lambda p, q: np.asarray(rj.quaternion_multiply(p, q))  # noqa: E731
+    return mult(mult(parts[0], parts[1]), parts[2]) if intrinsic else mult(mult(parts[2], parts[1]), parts[0])
+
+
+def _lock_combination_sign(seq, angles):
+    """s such that only a0 + s * a2 is defined at this lock, found from the forward map."""
+    R = np.asarray(rj.euler_to_matrix(angles, seq))
+    for s in (1.0, -1.0):
+        moved = angles + np.array([-s * 0.3, 0.0, 0.3])
+        if np.abs(np.asarray(rj.euler_to_matrix(moved, seq)) - R).max() < 1e-12:
+            return s
+    raise AssertionError("not at gimbal lock")
+
+
+@pytest.mark.parametrize("mid_index", [0, 1], ids=["lock_a", "lock_b"])
+@pytest.mark.parametrize("seq", SEQS)
+def test_euler_gradient_rule_at_exact_lock(seq, mid_index):
+    """Exactly at lock: the third angle is 0; its derivative and the middle angle's are 0; the
+    first angle's derivative is that of the defined combination a0 + s a2 (finite
+    differences of that smooth function through nearby non-locked points)."""
+    q = _exact_lock_quaternion(seq, mid_index)
+    ang = np.asarray(rj.quaternion_to_euler(q, seq))
+    assert ang[2] == 0.0
+    assert_close(rj.euler_to_matrix(ang, seq), rj.quaternion_to_matrix(q), atol=1e-15)
+    s = _lock_combination_sign(seq, ang)
+    J = np.asarray(jax.jacrev(lambda x: rj.quaternion_to_euler(x, seq))(jnp.asarray(q)))
+    assert np.all(np.isfinite(J))
+    np.testing.assert_array_equal(J[1:], 0.0)
+    assert np.abs(J[0]).max() > 0.1  # not a silent zero
+
+    def combo(x):
+        a = np.asarray(rj.quaternion_to_euler(x, seq))
+        return a[0] + s * a[2]
+
+    h = 1e-7
+    fd = np.array([angle_diff(combo(q + h * e), combo(q - h * e)) / (2 * h) for e in np.eye(4)])
+    assert_close(J[0], fd, atol=1e-6)
+    Jf = np.asarray(jax.jacfwd(lambda x: rj.quaternion_to_euler(x, seq))(jnp.asarray(q)))
+    assert_close(Jf, J, atol=1e-15)
+
+
+@pytest.mark.parametrize("seq", SEQS)
+def test_euler_gradients_near_lock_are_true_derivatives(seq):
+    """1e-9 from lock the angles are differentiable; the derivative of the round trip
+    R -> angles -> R is the identity on tangent vectors (values ~1e9 cancel correctly)."""
+    mid = (1e-9 if is_proper(seq) else np.pi / 2 - 1e-9)
+    R = np.asarray(rj.euler_to_matrix(np.array([0.4, mid, -1.3]), seq))
+    for omega in OMEGAS:
+        dR = R @ np.asarray(hat(omega))
+        _, jvp = jax.jvp(lambda m: rj.euler_to_matrix(rj.matrix_to_euler(m, seq), seq), (jnp.asarray(R),),
+                         (jnp.asarray(dR),))  # fmt: skip
+        assert_close(jvp, dR, atol=1e-6 * max(1.0, 1.0))
+    g = jax.grad(lambda m: jnp.sum(rj.matrix_to_euler(m, seq)))(jnp.asarray(R))
+    assert np.all(np.isfinite(g))
+
+
+@pytest.mark.parametrize("seq", ["XYZ", "ZXZ", "zyx", "yzy"])
+def test_euler_to_matrix_grads_at_lock(seq):
+    """The forward map is smooth everywhere, gimbal lock included."""
+    for mid in (0.0, np.pi) if is_proper(seq) else (np.pi / 2, -np.pi / 2):
+        a = np.array([0.3, mid, 0.5])
+        check_grads(lambda x: rj.euler_to_matrix(x, seq), (a,), 2, modes=("fwd", "rev"))
+        check_grads(lambda x: rj.euler_to_quaternion(x, seq), (a,), 2, modes=("fwd", "rev"))
