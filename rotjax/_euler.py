@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -13,10 +14,7 @@ from ._numerics import (
     check_shape,
     from_scalar_last,
     public,
-    safe_atan2,
-    safe_norm,
     to_scalar_last,
-    wrap_angle,
 )
 from ._quaternion import _multiply, _to_matrix
 
@@ -73,11 +71,106 @@ def _elementary(axis: int, angle):
     return jnp.stack(comps, axis=-1)
 
 
+# --- a polynomial atan2 ----------------------------------------------------------------------
+# XLA:CPU's atan2 runs at about 10 M/s per core and dominated Euler extraction (three per
+# rotation). This branch-free version is measured 10x faster (``python -m rotjax bench``) and
+# within 1.2 ulp (float32) / 1.0 ulp (float64) of the correctly rounded value, like XLA's.
+#
+# Reduction: t = min(|x|, |y|) / max(|x|, |y|) in [0, 1]; above tan(pi/8) it is mapped to
+# u = (t - 1) / (t + 1) (one division either way), so |u| <= tan(pi/8) and
+# atan2 = k pi/4 +- atan(u) for an octant k in 0..4, with k pi/4 split into hi + lo parts so the
+# reconstruction adds no more than the final rounding.
+# atan(u) = u + u s P(s), s = u^2: P is a Chebyshev fit (mpmath.chebyfit at 50 digits) of
+# (atan(u)/u - 1)/s on [0, tan^2(pi/8)], degree 5 for float32 and 11 for float64; max error
+# relative to atan(u): 9e-11 and 2e-19, far below half an eps.
+_ATAN_P = {
+    4: (
+        0.050481385120797445, -0.08624676145249494, 0.11071365021884794, -0.14284151193628614,
+        0.19999977258688387, -0.333333332792548,
+    ),
+    8: (
+        0.016285756855221028, -0.034570561981427744, 0.04551593220626549, -0.05230454270650244,
+        0.05878928997834775, -0.06666424885738255, 0.07692296375032143, -0.09090908753500877,
+        0.11111111105155447, -0.14285714285659828, 0.19999999999999804, -0.3333333333333333,
+    ),
+}  # fmt: skip
+_QUARTER_PI = {  # (hi, lo) of k pi/4, k = 0..4, rounded to float32 / float64
+    4: (
+        (0.0, 0.7853981852531433, 1.5707963705062866, 2.356194496154785, 3.1415927410125732),
+        (0.0, -2.1855694143368964e-08, -4.371138828673793e-08, -5.962440319251527e-09,
+         -8.742277657347586e-08),
+    ),
+    8: (
+        (0.0, 0.7853981633974483, 1.5707963267948966, 2.356194490192345, 3.141592653589793),
+        (0.0, 3.061616997868383e-17, 6.123233995736766e-17, 9.184850993605148e-17,
+         1.2246467991473532e-16),
+    ),
+}  # fmt: skip
+_TAN_PI_8 = 0.41421356237309503
+
+
+@jax.custom_jvp
+def _atan2(y, x):
+    """``atan2(y, x)`` for float32/float64, branch-free; 0 (not NaN) at ``x = y = 0``.
+
+    Signed zeros follow IEEE ``atan2`` except at the origin, which gives 0 like
+    :func:`rotjax._numerics.safe_atan2`.
+    """
+    size = jnp.dtype(x.dtype).itemsize
+    ax, ay = jnp.abs(x), jnp.abs(y)
+    swap = ay > ax
+    mn, mx = jnp.minimum(ax, ay), jnp.maximum(ax, ay)
+    big = mn > _TAN_PI_8 * mx
+    num = jnp.where(big, mn - mx, mn)
+    den = jnp.where(big, mn + mx, mx)
+    u = num / jnp.where(den == 0, 1, den)  # x = y = 0: u = 0
+    s = u * u
+    p = jnp.full_like(s, _ATAN_P[size][0])
+    for c in _ATAN_P[size][1:]:
+        p = p * s + c
+    r = u + u * (s * p)
+    xneg = jnp.signbit(x)
+    k = jnp.where(big, 1, 0)
+    k = jnp.where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
+    k = jnp.where(xneg, 4 - k, k)  # pi - (...) for x < 0
+    sign = jnp.where(swap != xneg, -1, 1).astype(x.dtype)
+    hi, lo = _QUARTER_PI[size]
+
+    def octant(vals):
+        v = jnp.where(k == 1, vals[1], vals[0])
+        v = jnp.where(k == 2, vals[2], v)
+        v = jnp.where(k == 3, vals[3], v)
+        return jnp.where(k == 4, vals[4], v).astype(x.dtype)
+
+    a = octant(hi) + (octant(lo) + sign * r)
+    a = jnp.where(jnp.signbit(y), -a, a)
+    return jnp.where((ax == 0) & (ay == 0), jnp.zeros_like(a), a)
+
+
+@_atan2.defjvp
+def _atan2_jvp(primals, tangents):
+    # The exact derivative, (x dy - y dx) / (x^2 + y^2); 0 at the origin, as safe_atan2.
+    (y, x), (dy, dx) = primals, tangents
+    r2 = x * x + y * y
+    return _atan2(y, x), (x * dy - y * dx) / jnp.where(r2 == 0, 1, r2)
+
+
 def _euler_to_quat(a, seq):
     axes, intrinsic = parse_seq(seq)
     q0, q1, q2 = (_elementary(ax, a[..., n]) for n, ax in enumerate(axes))
     # intrinsic: R = R_0 R_1 R_2 (rotating axes); extrinsic: R = R_2 R_1 R_0 (fixed axes)
     return _multiply(_multiply(q0, q1), q2) if intrinsic else _multiply(_multiply(q2, q1), q0)
+
+
+def _hypot(u, v):
+    """``sqrt(u^2 + v^2)`` with a finite (zero) gradient at the origin (double where).
+
+    Written on the two scalars rather than as ``safe_norm`` of a stacked pair: XLA:CPU turns
+    that reduction into separate loops.
+    """
+    sq = u * u + v * v
+    zero = sq == 0
+    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))
 
 
 def _quat_to_euler(q, seq):
@@ -98,30 +191,33 @@ def _quat_to_euler(q, seq):
     else:
         a, b = q[..., 3] - q[..., j], q[..., i] + sign * q[..., k]
         c, d = q[..., j] + q[..., 3], sign * q[..., k] - q[..., i]
-    ab = jnp.stack([a, b], axis=-1)
-    cd = jnp.stack([c, d], axis=-1)
-    mid = 2 * safe_atan2(safe_norm(cd), safe_norm(ab))
-    half_sum = safe_atan2(b, a)
-    half_diff = safe_atan2(d, c)
-    first, third = half_sum - half_diff, half_sum + half_diff
+    mid = 2 * _atan2(_hypot(c, d), _hypot(a, b))
+    # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
+    # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
+    # (no wrap), and one rounding less than subtracting two atan2 results.
     # Exactly at gimbal lock only one combination of the outer angles is defined. There the
     # angle that ends up *third* in the output is set to 0, as scipy does; this is an equality
-    # test, not a threshold, so angles near lock keep the exact (threshold-free) formula.
+    # test, not a threshold, so angles near lock keep the exact (threshold-free) formula. The
+    # zero factor is replaced by (the conjugate of) the other one, which gives exactly that:
+    # e.g. C := conj(A) turns arg(A conj(C)) into 2 arg(A) and arg(A C) into arg(|A|^2) = 0.
     lock_sum = (c == 0) & (d == 0)  # middle angle at 0 (proper) / +pi/2 (Tait-Bryan)
     lock_diff = (a == 0) & (b == 0)  # middle angle at pi (proper) / -pi/2 (Tait-Bryan)
-    if intrinsic:  # third output angle is `first` here (reversed below)
-        third = jnp.where(lock_sum, 2 * half_sum, jnp.where(lock_diff, 2 * half_diff, third))
-        first = jnp.where(lock_sum | lock_diff, 0.0, first)
-    else:
-        first = jnp.where(lock_sum, 2 * half_sum, jnp.where(lock_diff, -2 * half_diff, first))
-        third = jnp.where(lock_sum | lock_diff, 0.0, third)
+    flip = 1 if intrinsic else -1  # extrinsic keeps `first`, intrinsic keeps `third`
+    c, d = jnp.where(lock_sum, a, c), jnp.where(lock_sum, flip * b, d)
+    a, b = jnp.where(lock_diff, c, a), jnp.where(lock_diff, flip * d, b)
+    first = _atan2(b * c - a * d, a * c + b * d)
+    third = _atan2(b * c + a * d, a * c - b * d)
     if not proper:
         third = sign * third
         mid = mid - np.pi / 2
     out = (third, mid, first) if intrinsic else (first, mid, third)
-    out = jnp.stack([wrap_angle(out[0]), out[1], wrap_angle(out[2])], axis=-1)
+    # Stacked on a leading axis and moved last: XLA:CPU then evaluates each angle in a loop of
+    # its own and transposes, rather than switching between the three per output element.
+    out = jnp.moveaxis(jnp.stack(out, axis=0), 0, -1)
     # NaN for the zero quaternion rather than a valid-looking rotation.
-    return jnp.where(jnp.sum(q * q, axis=-1, keepdims=True) == 0, jnp.nan, out)
+    x, y, z, w = (q[..., n] for n in range(4))
+    zero = (x * x + y * y + z * z + w * w) == 0  # not jnp.sum: see the stacking note above
+    return jnp.where(zero[..., None], jnp.nan, out)
 
 
 @public
