@@ -42,7 +42,9 @@ def main(argv: list[str] | None = None) -> int:
         print("  from axis-angle (same up to sign):   ", np.asarray(q_true))
         axis, angle = rj.quaternion_to_axis_angle(q, degrees=True)
         print(f"  axis {np.asarray(axis)}, angle {float(angle):.6f} deg")
-        print("  rotation vector [deg]:              ", np.asarray(rj.matrix_to_rotvec(dcm.T, True)))
+        print(
+            "  rotation vector [deg]:              ", np.asarray(rj.matrix_to_rotvec(dcm.T, True))
+        )
         for seq in ("ZXZ", "XYZ", "zyx"):
             ang = rj.matrix_to_euler(dcm.T, seq, degrees=True)
             print(f"  Euler {seq} [deg]:                    ", np.asarray(ang))

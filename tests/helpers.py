@@ -62,9 +62,9 @@ def fd_jacobian(f, x, h=1e-6):
     for idx in np.ndindex(x.shape):
         e = np.zeros_like(x)
         e[idx] = h
-        jac[(...,) + idx] = (np.asarray(f(jnp.asarray(x + e))) - np.asarray(f(jnp.asarray(x - e)))) / (
-            2 * h
-        )
+        jac[(...,) + idx] = (
+            np.asarray(f(jnp.asarray(x + e))) - np.asarray(f(jnp.asarray(x - e)))
+        ) / (2 * h)
     return jac
 
 
@@ -132,7 +132,7 @@ def mp_euler_to_matrix(angles, seq, dps=40):
     axes, intrinsic = parse_seq(seq)
     with mp.workdps(dps):
         mats = []
-        for ax, a in zip(axes, angles):
+        for ax, a in zip(axes, angles, strict=True):
             c, s = mp.cos(mp.mpf(float(a))), mp.sin(mp.mpf(float(a)))
             m = mp.eye(3)
             i, j = [(1, 2), (2, 0), (0, 1)][ax]
@@ -147,7 +147,9 @@ def mp_max_diff(a, b, dps=40):
     import mpmath as mp
 
     with mp.workdps(dps):
-        return float(max(abs(mp.mpf(a[r][k]) - mp.mpf(b[r][k])) for r in range(3) for k in range(3)))
+        return float(
+            max(abs(mp.mpf(a[r][k]) - mp.mpf(b[r][k])) for r in range(3) for k in range(3))
+        )
 
 
 def mp_matrix_to_quaternion(R, dps=40):
@@ -158,10 +160,30 @@ def mp_matrix_to_quaternion(R, dps=40):
     with mp.workdps(dps):
         r = [[mp.mpf(float(R[i][j])) for j in range(3)] for i in range(3)]
         cols = [
-            [1 + r[0][0] - r[1][1] - r[2][2], r[0][1] + r[1][0], r[0][2] + r[2][0], r[2][1] - r[1][2]],
-            [r[0][1] + r[1][0], 1 - r[0][0] + r[1][1] - r[2][2], r[1][2] + r[2][1], r[0][2] - r[2][0]],
-            [r[0][2] + r[2][0], r[1][2] + r[2][1], 1 - r[0][0] - r[1][1] + r[2][2], r[1][0] - r[0][1]],
-            [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1], 1 + r[0][0] + r[1][1] + r[2][2]],
+            [
+                1 + r[0][0] - r[1][1] - r[2][2],
+                r[0][1] + r[1][0],
+                r[0][2] + r[2][0],
+                r[2][1] - r[1][2],
+            ],
+            [
+                r[0][1] + r[1][0],
+                1 - r[0][0] + r[1][1] - r[2][2],
+                r[1][2] + r[2][1],
+                r[0][2] - r[2][0],
+            ],
+            [
+                r[0][2] + r[2][0],
+                r[1][2] + r[2][1],
+                1 - r[0][0] - r[1][1] + r[2][2],
+                r[1][0] - r[0][1],
+            ],
+            [
+                r[2][1] - r[1][2],
+                r[0][2] - r[2][0],
+                r[1][0] - r[0][1],
+                1 + r[0][0] + r[1][1] + r[2][2],
+            ],
         ]
         best = max(range(4), key=lambda i: cols[i][i])
         v = cols[best]

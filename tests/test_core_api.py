@@ -45,7 +45,9 @@ def _reshape(x, batch, trailing):
 
 
 def _flat(out, batch):
-    return jax.tree.map(lambda o: np.asarray(o).reshape(int(np.prod(batch, dtype=int)), *o.shape[len(batch) :]), out)
+    return jax.tree.map(
+        lambda o: np.asarray(o).reshape(int(np.prod(batch, dtype=int)), *o.shape[len(batch) :]), out
+    )
 
 
 @pytest.mark.parametrize("batch", BATCH_SHAPES, ids=str)
@@ -56,7 +58,11 @@ def test_unary_batch_jit_vmap(name, batch):
     out = f(xb)
     ref = f(x)  # the flat batch
     n = int(np.prod(batch, dtype=int))
-    jax.tree.map(lambda o, r: assert_close(np.asarray(o).reshape(n, *r.shape[1:]), r[:n], atol=1e-15), out, ref)
+    jax.tree.map(
+        lambda o, r: assert_close(np.asarray(o).reshape(n, *r.shape[1:]), r[:n], atol=1e-15),
+        out,
+        ref,
+    )
     jax.tree.map(lambda o, j: assert_close(j, o, atol=1e-15), out, jax.jit(f)(xb))
     if batch:
         jax.tree.map(lambda o, v: assert_close(v, o, atol=1e-15), out, jax.vmap(f)(xb))
@@ -77,7 +83,9 @@ def test_binary_broadcasting(name, batch):
         assert_close(jax.vmap(f)(xb, yb), f(xb, yb), atol=1e-15)
 
 
-@pytest.mark.parametrize("dtype", DTYPES + [np.float16, jnp.bfloat16], ids=lambda d: jnp.dtype(d).name)
+@pytest.mark.parametrize(
+    "dtype", DTYPES + [np.float16, jnp.bfloat16], ids=lambda d: jnp.dtype(d).name
+)
 @pytest.mark.parametrize("name", sorted(UNARY))
 def test_dtype_preserved(name, dtype):
     f, x, _ = UNARY[name]
@@ -87,10 +95,17 @@ def test_dtype_preserved(name, dtype):
         assert np.all(np.isfinite(np.asarray(o, np.float64)))
 
 
-@pytest.mark.parametrize("name", ["quaternion_to_matrix", "quaternion_to_euler", "rotvec_to_matrix"])
+@pytest.mark.parametrize(
+    "name", ["quaternion_to_matrix", "quaternion_to_euler", "rotvec_to_matrix"]
+)
 def test_integers_promote_to_float(name):
     f, _, nd = UNARY[name]
-    x = np.zeros((2, 3) if nd == 1 and name != "quaternion_to_matrix" and name != "quaternion_to_euler" else (2, 4), int)
+    x = np.zeros(
+        (2, 3)
+        if nd == 1 and name != "quaternion_to_matrix" and name != "quaternion_to_euler"
+        else (2, 4),
+        int,
+    )
     x[..., -1] = 1
     out = f(x)
     assert jnp.issubdtype(out.dtype, jnp.floating)
@@ -105,48 +120,78 @@ def test_scalar_first_everywhere():
         ("rotation_angle", rj.rotation_angle),
         ("quaternion_to_axis_angle", rj.quaternion_to_axis_angle),
     ]:
-        jax.tree.map(lambda a, b: assert_close(a, b, atol=0, err_msg=name), f(qf, scalar_first=True), f(Q))
+        jax.tree.map(
+            lambda a, b: assert_close(a, b, atol=0, err_msg=name), f(qf, scalar_first=True), f(Q)
+        )
     for name, f in [
         ("quaternion_normalize", rj.quaternion_normalize),
         ("quaternion_conjugate", rj.quaternion_conjugate),
         ("quaternion_inverse", rj.quaternion_inverse),
     ]:
-        assert_close(f(qf, scalar_first=True), np.roll(np.asarray(f(Q)), 1, -1), atol=0, err_msg=name)
+        assert_close(
+            f(qf, scalar_first=True), np.roll(np.asarray(f(Q)), 1, -1), atol=0, err_msg=name
+        )
     for name, f in [
         ("matrix_to_quaternion", lambda **k: rj.matrix_to_quaternion(R, **k)),
         ("rotvec_to_quaternion", lambda **k: rj.rotvec_to_quaternion(V, **k)),
         ("euler_to_quaternion", lambda **k: rj.euler_to_quaternion(A, "ZYX", **k)),
         ("axis_angle_to_quaternion", lambda **k: rj.axis_angle_to_quaternion(V, A[:, 0], **k)),
-        ("quaternion_multiply", lambda **k: rj.quaternion_multiply(
-            Q if not k else qf, Q[::-1] if not k else qf[::-1], **k)),
-        ("relative_rotation", lambda **k: rj.relative_rotation(
-            Q if not k else qf, Q[::-1] if not k else qf[::-1], **k)),
+        (
+            "quaternion_multiply",
+            lambda **k: rj.quaternion_multiply(
+                Q if not k else qf, Q[::-1] if not k else qf[::-1], **k
+            ),
+        ),
+        (
+            "relative_rotation",
+            lambda **k: rj.relative_rotation(
+                Q if not k else qf, Q[::-1] if not k else qf[::-1], **k
+            ),
+        ),
     ]:
         assert_close(f(scalar_first=True), np.roll(np.asarray(f()), 1, -1), atol=0, err_msg=name)
     assert_close(rj.quaternion_apply(qf, V, scalar_first=True), rj.quaternion_apply(Q, V), atol=0)
-    assert_close(rj.angle_between(qf, qf[::-1], scalar_first=True), rj.angle_between(Q, Q[::-1]), atol=0)
+    assert_close(
+        rj.angle_between(qf, qf[::-1], scalar_first=True), rj.angle_between(Q, Q[::-1]), atol=0
+    )
 
 
 def test_degrees_option():
-    assert_close(rj.euler_to_matrix(np.rad2deg(A), "ZYX", degrees=True), rj.euler_to_matrix(A, "ZYX"), atol=1e-15)
+    assert_close(
+        rj.euler_to_matrix(np.rad2deg(A), "ZYX", degrees=True),
+        rj.euler_to_matrix(A, "ZYX"),
+        atol=1e-15,
+    )
     assert_close(rj.quaternion_to_euler(Q, "ZYX", degrees=True), np.rad2deg(A), atol=1e-12)
     assert_close(rj.matrix_to_euler(R, "ZYX", degrees=True), np.rad2deg(A), atol=1e-12)
-    assert_close(rj.rotvec_to_quaternion(np.rad2deg(V), degrees=True), rj.rotvec_to_quaternion(V), atol=1e-15)
+    assert_close(
+        rj.rotvec_to_quaternion(np.rad2deg(V), degrees=True), rj.rotvec_to_quaternion(V), atol=1e-15
+    )
     assert_close(rj.quaternion_to_rotvec(Q, degrees=True), np.rad2deg(V), atol=1e-12)
 
 
 def test_algebra_identities():
     p, q = Q[:32], Q[32:]
     pq = rj.quaternion_multiply(p, q)
-    assert_close(rj.quaternion_to_matrix(pq), rj.quaternion_to_matrix(p) @ rj.quaternion_to_matrix(q), atol=1e-15)
+    assert_close(
+        rj.quaternion_to_matrix(pq),
+        rj.quaternion_to_matrix(p) @ rj.quaternion_to_matrix(q),
+        atol=1e-15,
+    )
     ident = rj.quaternion_multiply(3 * q, rj.quaternion_inverse(3 * q))
     assert_close(ident, np.broadcast_to([0, 0, 0, 1.0], ident.shape), atol=1e-15)
     v = V[:32]
-    assert_close(rj.quaternion_apply(2 * p, v), np.einsum("nij,nj->ni", rj.quaternion_to_matrix(p), v), atol=1e-14)
+    assert_close(
+        rj.quaternion_apply(2 * p, v),
+        np.einsum("nij,nj->ni", rj.quaternion_to_matrix(p), v),
+        atol=1e-14,
+    )
     assert_close(rj.quaternion_normalize(5 * p), p, atol=1e-15)
     assert_close(rj.angle_between(p, -p), 0, atol=1e-15)
     assert_close(rj.angle_between(p, q), rj.rotation_angle(rj.relative_rotation(p, q)), atol=1e-14)
-    assert_close(rj.rotation_angle(p), np.linalg.norm(rj.quaternion_to_rotvec(p), axis=-1), atol=1e-14)
+    assert_close(
+        rj.rotation_angle(p), np.linalg.norm(rj.quaternion_to_rotvec(p), axis=-1), atol=1e-14
+    )
     axis, angle = rj.quaternion_to_axis_angle(p)
     assert_same_rotation(rj.axis_angle_to_quaternion(axis, angle), p, atol=1e-15)
 
@@ -163,7 +208,9 @@ def test_non_unit_quaternions_are_normalised():
 # --- bad input --------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("seq", ["xyx ", "XYx", "XXY", "xyy", "abc", "12", "1234", "313a", "113", "404", "", 123])
+@pytest.mark.parametrize(
+    "seq", ["xyx ", "XYx", "XXY", "xyy", "abc", "12", "1234", "313a", "113", "404", "", 123]
+)
 def test_bad_sequence_raises_listing_valid_forms(seq):
     with pytest.raises(ValueError, match="uppercase for intrinsic") as info:
         rj.euler_to_matrix(A, seq)
@@ -180,7 +227,11 @@ def test_bad_sequence_raises_listing_valid_forms(seq):
         (rj.rotvec_to_matrix, np.zeros((4,)), r"\(\.\.\., 3\), got \(4,\)"),
         (lambda x: rj.euler_to_matrix(x, "XYZ"), np.zeros((2, 2)), r"\(\.\.\., 3\), got \(2, 2\)"),
         (lambda x: rj.matrix_to_euler(x, "XYZ"), np.zeros((3,)), r"\(\.\.\., 3, 3\), got \(3,\)"),
-        (lambda x: rj.quaternion_apply(x, np.zeros(4)), np.zeros(4), r"v: expected shape \(\.\.\., 3\)"),
+        (
+            lambda x: rj.quaternion_apply(x, np.zeros(4)),
+            np.zeros(4),
+            r"v: expected shape \(\.\.\., 3\)",
+        ),
     ],
 )
 def test_wrong_shape_raises_with_both_shapes(f, x, expected):
@@ -211,9 +262,15 @@ def test_nan_stays_in_its_batch_element():
 
 def test_zero_quaternion_gives_nan():
     z = np.zeros(4)
-    for f in [rj.quaternion_to_matrix, rj.quaternion_to_rotvec, rj.rotation_angle, rj.quaternion_normalize,
-              lambda x: rj.quaternion_to_euler(x, "XYZ"), lambda x: rj.quaternion_to_euler(x, "ZXZ"),
-              lambda x: rj.quaternion_apply(x, np.ones(3))]:  # fmt: skip
+    for f in [
+        rj.quaternion_to_matrix,
+        rj.quaternion_to_rotvec,
+        rj.rotation_angle,
+        rj.quaternion_normalize,
+        lambda x: rj.quaternion_to_euler(x, "XYZ"),
+        lambda x: rj.quaternion_to_euler(x, "ZXZ"),
+        lambda x: rj.quaternion_apply(x, np.ones(3)),
+    ]:
         assert np.all(np.isnan(np.asarray(f(z))))
     axis, angle = rj.quaternion_to_axis_angle(z)
     assert np.all(np.isnan(axis)) and np.isnan(angle)

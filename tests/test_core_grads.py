@@ -16,8 +16,10 @@ Q = random_quaternions(3, seed=31)
 OMEGAS = np.array([[1.0, 0, 0], [0, 1, 0], [0, 0, 1], [0.3, -0.7, 0.2]])
 GENERIC = {
     "quaternion_to_matrix": (rj.quaternion_to_matrix, Q[0]),
-    "matrix_to_quaternion_optimal": (lambda R: rj.matrix_to_quaternion(R, method="optimal"),
-                                     np.asarray(rj.quaternion_to_matrix(Q[1]))),  # fmt: skip
+    "matrix_to_quaternion_optimal": (
+        lambda R: rj.matrix_to_quaternion(R, method="optimal"),
+        np.asarray(rj.quaternion_to_matrix(Q[1])),
+    ),  # fmt: skip
     "rotvec_to_quaternion": (rj.rotvec_to_quaternion, np.array([0.3, -1.2, 0.7])),
     "quaternion_to_rotvec": (rj.quaternion_to_rotvec, Q[2]),
     "rotvec_to_matrix": (rj.rotvec_to_matrix, np.array([0.3, -1.2, 0.7])),
@@ -27,7 +29,10 @@ GENERIC = {
     "quaternion_multiply": (lambda q: rj.quaternion_multiply(q, Q[1]), Q[0]),
     "relative_rotation": (lambda q: rj.relative_rotation(q, Q[1]), Q[0]),
     "quaternion_inverse": (rj.quaternion_inverse, Q[0]),
-    "axis_angle_to_quaternion": (lambda a: rj.axis_angle_to_quaternion(a, 0.7), np.array([1.0, 2, 3])),
+    "axis_angle_to_quaternion": (
+        lambda a: rj.axis_angle_to_quaternion(a, 0.7),
+        np.array([1.0, 2, 3]),
+    ),
     "quaternion_to_axis_angle": (rj.quaternion_to_axis_angle, Q[2]),
 }
 
@@ -52,10 +57,13 @@ def test_check_grads_euler_generic(seq):
     R = np.asarray(rj.euler_to_matrix(a, seq))
     for omega in OMEGAS:  # d angles along R omega^ equals the rate-map answer, by FD
         dR = R @ np.asarray(hat(omega))
-        _, jvp = jax.jvp(lambda m: rj.matrix_to_euler(m, seq), (jnp.asarray(R),), (jnp.asarray(dR),))
+        _, jvp = jax.jvp(
+            lambda m: rj.matrix_to_euler(m, seq), (jnp.asarray(R),), (jnp.asarray(dR),)
+        )
         h = 1e-6
-        fd = angle_diff(rj.matrix_to_euler(R @ np.asarray(rj.rotvec_to_matrix(h * omega)), seq),
-                        rj.matrix_to_euler(R @ np.asarray(rj.rotvec_to_matrix(-h * omega)), seq)) / (2 * h)  # fmt: skip
+        plus = rj.matrix_to_euler(R @ np.asarray(rj.rotvec_to_matrix(h * omega)), seq)
+        minus = rj.matrix_to_euler(R @ np.asarray(rj.rotvec_to_matrix(-h * omega)), seq)
+        fd = angle_diff(plus, minus) / (2 * h)
         assert_close(jvp, fd, atol=1e-7)
 
 
@@ -143,14 +151,20 @@ def test_matrix_to_rotvec_tangent_derivative(name):
     R = SPECIAL_MATRICES[name]
     for omega in OMEGAS:
         dR = R @ np.asarray(hat(omega))
-        _, jvp = jax.jvp(lambda m: rj.rotvec_to_matrix(rj.matrix_to_rotvec(m)), (jnp.asarray(R),), (jnp.asarray(dR),))
+        _, jvp = jax.jvp(
+            lambda m: rj.rotvec_to_matrix(rj.matrix_to_rotvec(m)),
+            (jnp.asarray(R),),
+            (jnp.asarray(dR),),
+        )
         assert_close(jvp, dR, atol=1e-12)
         if name == "identity":
             _, d = jax.jvp(rj.matrix_to_rotvec, (jnp.asarray(R),), (jnp.asarray(dR),))
             assert_close(d, omega, atol=1e-15)
 
 
-@pytest.mark.parametrize("q", [np.array([1.0, 0, 0, 0]), np.array([0.0, 0.6, 0.8, 0]), np.array([0.6, 0, 0.8, 1e-12])])
+@pytest.mark.parametrize(
+    "q", [np.array([1.0, 0, 0, 0]), np.array([0.0, 0.6, 0.8, 0]), np.array([0.6, 0, 0.8, 1e-12])]
+)
 def test_log_map_derivative_at_180_is_the_branch_derivative(q):
     """At 180 degrees the log has a cut; the gradient is that of the w >= 0 branch, so
     exp(log(q)) reproduces dR exactly."""
@@ -194,7 +208,11 @@ def _exact_lock_quaternion(seq, mid_index):
 
     parts = [elem(axes[0], 0.5, 1.0), elem(axes[1], s, c), elem(axes[2], -0.25, 1.0)]
     mult = lambda p, q: np.asarray(rj.quaternion_multiply(p, q))  # noqa: E731
-    return mult(mult(parts[0], parts[1]), parts[2]) if intrinsic else mult(mult(parts[2], parts[1]), parts[0])
+    return (
+        mult(mult(parts[0], parts[1]), parts[2])
+        if intrinsic
+        else mult(mult(parts[2], parts[1]), parts[0])
+    )
 
 
 def _lock_combination_sign(seq, angles):
@@ -238,12 +256,15 @@ def test_euler_gradient_rule_at_exact_lock(seq, mid_index):
 def test_euler_gradients_near_lock_are_true_derivatives(seq):
     """1e-9 from lock the angles are differentiable; the derivative of the round trip
     R -> angles -> R is the identity on tangent vectors (values ~1e9 cancel correctly)."""
-    mid = (1e-9 if is_proper(seq) else np.pi / 2 - 1e-9)
+    mid = 1e-9 if is_proper(seq) else np.pi / 2 - 1e-9
     R = np.asarray(rj.euler_to_matrix(np.array([0.4, mid, -1.3]), seq))
     for omega in OMEGAS:
         dR = R @ np.asarray(hat(omega))
-        _, jvp = jax.jvp(lambda m: rj.euler_to_matrix(rj.matrix_to_euler(m, seq), seq), (jnp.asarray(R),),
-                         (jnp.asarray(dR),))  # fmt: skip
+        _, jvp = jax.jvp(
+            lambda m: rj.euler_to_matrix(rj.matrix_to_euler(m, seq), seq),
+            (jnp.asarray(R),),
+            (jnp.asarray(dR),),
+        )
         assert_close(jvp, dR, atol=1e-6 * max(1.0, 1.0))
     g = jax.grad(lambda m: jnp.sum(rj.matrix_to_euler(m, seq)))(jnp.asarray(R))
     assert np.all(np.isfinite(g))

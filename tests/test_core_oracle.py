@@ -35,7 +35,9 @@ def adversarial_sets(n=40, seed=0):
     exactly 180 degrees, and largest-component ties."""
     rng = np.random.default_rng(seed)
     near_id = _normalise(np.concatenate([1e-7 * rng.normal(size=(n, 3)), np.ones((n, 1))], 1))
-    near_180 = _normalise(np.concatenate([rng.normal(size=(n, 3)), 1e-7 * rng.normal(size=(n, 1))], 1))
+    near_180 = _normalise(
+        np.concatenate([rng.normal(size=(n, 3)), 1e-7 * rng.normal(size=(n, 1))], 1)
+    )
     exact_180 = _normalise(np.concatenate([rng.normal(size=(n, 3)), np.zeros((n, 1))], 1))
     ties = np.array(list(itertools.product([0.5, -0.5], repeat=4)))  # all components equal
     ties2 = _normalise(np.array([[1, 1, 0, 0], [0, 1, 1, 0], [1, 0, 0, 1], [0, 1, 0, -1.0]]))
@@ -86,7 +88,9 @@ def test_euler_matches_scipy_generic(seq):
     R_expected = Rotation.from_euler(seq, expected).as_matrix()
     assert_close(rj.euler_to_matrix(expected, seq), R_expected, atol=10 * EPS64)
     assert_same_rotation(
-        rj.euler_to_quaternion(expected, seq), Rotation.from_euler(seq, expected).as_quat(), atol=4 * EPS64
+        rj.euler_to_quaternion(expected, seq),
+        Rotation.from_euler(seq, expected).as_quat(),
+        atol=4 * EPS64,
     )
 
 
@@ -107,10 +111,14 @@ def test_digit_sequences_are_intrinsic(seq):
     q = random_quaternions(20, seed=7)
     assert_close(rj.quaternion_to_euler(q, seq), rj.quaternion_to_euler(q, letters), atol=0)
     a = np.asarray(rj.quaternion_to_euler(q, seq))
-    assert_close(rj.euler_to_matrix(a, seq), Rotation.from_euler(letters, a).as_matrix(), atol=1e-15)
+    assert_close(
+        rj.euler_to_matrix(a, seq), Rotation.from_euler(letters, a).as_matrix(), atol=1e-15
+    )
 
 
-EXACT_GRID = np.array([q for q in itertools.product([-1, -0.5, 0, 0.5, 1], repeat=4) if any(q)], float)
+EXACT_GRID = np.array(
+    [q for q in itertools.product([-1, -0.5, 0, 0.5, 1], repeat=4) if any(q)], float
+)
 
 
 @pytest.mark.parametrize("seq", SEQS)
@@ -171,7 +179,9 @@ def test_euler_backward_error_ulp(seq, dtype):
                         ACC_SETS["near_180"][:3], lock]).astype(dtype)  # fmt: skip
     a = np.asarray(rj.quaternion_to_euler(q, seq))
     assert a.dtype == dtype
-    err = max(mp_max_diff(mp_euler_to_matrix(a[i], seq), mp_quat_to_matrix(q[i])) for i in range(len(q)))
+    err = max(
+        mp_max_diff(mp_euler_to_matrix(a[i], seq), mp_quat_to_matrix(q[i])) for i in range(len(q))
+    )
     assert err <= (5 if dtype == np.float64 else 7) * eps, f"{err / eps:.2f} ulp"
 
 
@@ -192,7 +202,9 @@ def test_rotvec_round_trips(dtype):
     eps = np.finfo(dtype).eps
     rng = np.random.default_rng(8)
     axis = _normalise(rng.normal(size=(200, 3)))
-    angle = np.concatenate([rng.uniform(0, np.pi, 194), [0, 1e-30, 1e-12, 1e-6, np.pi, np.pi - 1e-9]])
+    angle = np.concatenate(
+        [rng.uniform(0, np.pi, 194), [0, 1e-30, 1e-12, 1e-6, np.pi, np.pi - 1e-9]]
+    )
     v = (axis * angle[:, None]).astype(dtype)
     back = np.asarray(rj.quaternion_to_rotvec(rj.rotvec_to_quaternion(v)))
     # at exactly pi both v and -v are valid
@@ -215,8 +227,14 @@ def test_rotvec_tiny_and_huge_angles():
     for turns in [1e3, 1e6]:
         theta = 2 * np.pi * turns + 0.5  # huge angle = 0.5 rad modulo full turns
         v = np.array([0.0, 0.0, theta])
-        assert_close(rj.rotvec_to_matrix(v), Rotation.from_rotvec([0, 0, 0.5]).as_matrix(), atol=1e-15 * theta)
-        assert_close(rj.quaternion_to_rotvec(rj.rotvec_to_quaternion(v)), [0, 0, 0.5], atol=1e-15 * theta)
+        assert_close(
+            rj.rotvec_to_matrix(v),
+            Rotation.from_rotvec([0, 0, 0.5]).as_matrix(),
+            atol=1e-15 * theta,
+        )
+        assert_close(
+            rj.quaternion_to_rotvec(rj.rotvec_to_quaternion(v)), [0, 0, 0.5], atol=1e-15 * theta
+        )
 
 
 def test_angles_accurate_near_zero():

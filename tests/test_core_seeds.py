@@ -106,7 +106,11 @@ def test_nikravesh_A6_bryant_angles():
     phi3 = atan2(-a12, a11)."""
     for p1, p2, p3 in ANGLES - [0, 1.5, 0]:
         A = _nikravesh_A5(p1, p2, p3)
-        expected = [np.arctan2(-A[1, 2], A[2, 2]), np.arcsin(A[0, 2]), np.arctan2(-A[0, 1], A[0, 0])]
+        expected = [
+            np.arctan2(-A[1, 2], A[2, 2]),
+            np.arcsin(A[0, 2]),
+            np.arctan2(-A[0, 1], A[0, 0]),
+        ]
         assert_close(rj.matrix_to_euler(A, "XYZ"), expected, atol=1e-12)
 
 
@@ -160,4 +164,6 @@ def test_maplesim_relative_rotation():
     rel = rj.relative_rotation(qa, qb)
     Ra, Rb = rj.quaternion_to_matrix(qa), rj.quaternion_to_matrix(qb)
     assert_close(rj.quaternion_to_matrix(rel), Ra.T @ Rb, atol=1e-15)
-    assert_close(rj.quaternion_to_euler(rel, "123"), rj.matrix_to_euler(Ra.T @ Rb, "123"), atol=1e-14)
+    assert_close(
+        rj.quaternion_to_euler(rel, "123"), rj.matrix_to_euler(Ra.T @ Rb, "123"), atol=1e-14
+    )
