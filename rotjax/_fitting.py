@@ -6,7 +6,7 @@ Two private helpers carry the differentiation work and are shared by several fun
 * ``_project`` is the special-orthogonal projection of a 3x3 matrix by SVD, with a closed-form
   JVP that never touches the derivatives of ``U`` and ``V`` separately (those have
   ``1 / (s_i^2 - s_j^2)`` terms and are NaN whenever singular values tie, e.g. at the identity);
-* ``_top_eigvec`` is the eigenvector of the largest eigenvalue of a symmetric 4x4 matrix, with
+* ``top_eigenvector`` is the eigenvector of the largest eigenvalue of a symmetric 4x4 matrix, with
   a JVP whose ``1 / (lambda_max - lambda_j)`` terms are safe-divided.
 
 Both set to zero the component of the derivative that has no finite value: the direction in
@@ -20,6 +20,7 @@ import jax.numpy as jnp
 
 from ._matrix import _from_matrix, _k4_columns, _positive_w
 from ._numerics import (
+    TIE_ULPS,
     as_float,
     check_shape,
     cross,
@@ -27,8 +28,10 @@ from ._numerics import (
     from_scalar_last,
     public,
     safe_atan2,
+    safe_div,
     safe_norm,
     to_scalar_last,
+    top_eigenvector,
     vee,
 )
 from ._quaternion import _conjugate, _multiply, _normalize
@@ -36,19 +39,9 @@ from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
 
 ALIGN_METHODS = ("svd", "q-method")
 
-# A gap below ``_TIE * eps * scale`` is a tie in exact arithmetic: LAPACK resolves eigenvalues
-# and singular values of these small matrices to a few ulps of the largest one.
-_TIE = 64.0
-
 
 def _mT(x):
     return jnp.swapaxes(x, -1, -2)
-
-
-def _safe_div(num, den, tol):
-    """``num / den`` where ``|den| > tol``, else 0 (double where: the gradient stays finite)."""
-    small = jnp.abs(den) <= tol
-    return jnp.where(small, 0.0, num / jnp.where(small, 1.0, den))
 
 
 # --- special-orthogonal projection (SVD) --------------------------------------------------
@@ -84,34 +77,12 @@ def _project_jvp(primals, tangents):
     U, s, Vt = _svd_signed(M)
     P = _mT(U) @ dM @ _mT(Vt)
     den = s[..., :, None] + s[..., None, :]
-    tol = _TIE * eps(M.dtype) * jnp.abs(s[..., :1, None])
-    W = _safe_div(P - _mT(P), den, tol)
+    tol = TIE_ULPS * eps(M.dtype) * jnp.abs(s[..., :1, None])
+    W = safe_div(P - _mT(P), den, tol)
     return U @ Vt, U @ W @ Vt
 
 
 # --- top eigenvector of a symmetric 4x4 matrix ------------------------------------------
-
-
-@jax.custom_jvp
-def _top_eigvec(K):
-    """Unit eigenvector of the largest eigenvalue of the symmetric ``K`` (sign arbitrary)."""
-    return jnp.linalg.eigh(K)[1][..., :, -1]
-
-
-@_top_eigvec.defjvp
-def _top_eigvec_jvp(primals, tangents):
-    # First-order perturbation: dv = sum_{j != top} v_j (v_j^T dK v) / (lambda_top - lambda_j).
-    # A zero gap means the top eigenvector is not unique (e.g. one vector pair in Wahba's
-    # problem); the component along that eigenspace is set to 0 instead of inf.
-    (K,), (dK,) = primals, tangents
-    lam, V = jnp.linalg.eigh(K)
-    v = V[..., :, -1]
-    dK = 0.5 * (dK + _mT(dK))
-    proj = jnp.einsum("...ij,...ik,...k->...j", V, dK, v)
-    gap = lam[..., -1:] - lam
-    tol = _TIE * eps(K.dtype) * jnp.max(jnp.abs(lam), axis=-1, keepdims=True)
-    coef = _safe_div(proj, gap, tol)  # the top eigenvector itself has gap 0 -> coefficient 0
-    return v, jnp.einsum("...ij,...j->...i", V, coef)
 
 
 def _davenport(B):
@@ -323,7 +294,7 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
     if method == "svd":
         q = _from_matrix(_project(B), "shepperd")
     else:
-        q = _top_eigvec(_davenport(B))
+        q = top_eigenvector(_davenport(B))
     return from_scalar_last(_positive_w(q), scalar_first).astype(dt)
 
 
@@ -365,7 +336,7 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
         raise ValueError(f"weights: expected shape (..., {q.shape[-2]}), got {weights.shape}")
     qw = q if weights is None else q * weights[..., None]
     M = jnp.einsum("...ni,...nj->...ij", qw, q)
-    return from_scalar_last(_positive_w(_top_eigvec(M)), scalar_first).astype(dt)
+    return from_scalar_last(_positive_w(top_eigenvector(M)), scalar_first).astype(dt)
 
 
 @public

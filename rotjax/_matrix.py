@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from ._numerics import as_float, check_shape, from_scalar_last, public
+from ._numerics import as_float, check_shape, from_scalar_last, public, top_eigenvector
 
 METHODS = ("shepperd", "markley", "optimal")
 
@@ -132,26 +132,6 @@ def _matvec_k(cols, v):
     return sum(jnp.stack(cols[i], axis=-1) * v[..., i : i + 1] for i in range(4))
 
 
-@jax.custom_jvp
-def _top_eigenvector(K):
-    """Unit eigenvector of the largest eigenvalue of the symmetric ``(..., 4, 4)`` matrix ``K``."""
-    return jnp.linalg.eigh(K)[1][..., :, 3]
-
-
-@_top_eigenvector.defjvp
-def _top_eigenvector_jvp(primals, tangents):
-    # First-order perturbation of one eigenvector: dv = sum_j v_j (v_j . dK v) / (lam - lam_j).
-    # Only the gaps to the top eigenvalue appear. eigh's own derivative divides by the gaps
-    # between *all* eigenvalues, and the three lower ones of K are equal (0, 0, 0) for an exact
-    # rotation, so it returns NaN there (e.g. at the identity).
-    (K,), (dK,) = primals, tangents
-    lam, vecs = jnp.linalg.eigh(K)
-    v, low = vecs[..., :, 3], vecs[..., :, :3]
-    dKv = jnp.sum(dK * v[..., None, :], axis=-1)
-    coef = jnp.sum(low * dKv[..., :, None], axis=-2) / (lam[..., 3:] - lam[..., :3])
-    return v, jnp.sum(low * coef[..., None, :], axis=-1)
-
-
 def _from_matrix(R, method: str):
     if method == "shepperd":
         return _shepperd(R)
@@ -165,7 +145,7 @@ def _from_matrix(R, method: str):
         K = jnp.stack([jnp.stack(c, axis=-1) for c in cols], axis=-1)
         # Bar-Itzhack 2000: the top eigenvector of the symmetric K is the quaternion of the
         # rotation nearest to R in the Frobenius norm.
-        v = _top_eigenvector(K)
+        v = top_eigenvector(K)
     else:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     return _positive_w(_unit(v))
