@@ -275,5 +275,5 @@ def test_euler_to_matrix_grads_at_lock(seq):
     """The forward map is smooth everywhere, gimbal lock included."""
     for mid in (0.0, np.pi) if is_proper(seq) else (np.pi / 2, -np.pi / 2):
         a = np.array([0.3, mid, 0.5])
-        check_grads(lambda x: rj.euler_to_matrix(x, seq), (a,), 2, modes=("fwd", "rev"))
-        check_grads(lambda x: rj.euler_to_quaternion(x, seq), (a,), 2, modes=("fwd", "rev"))
+        check_grads(lambda x: rj.euler_to_matrix(x, seq), (a,), 1, modes=("fwd", "rev"))
+        check_grads(lambda x: rj.euler_to_quaternion(x, seq), (a,), 1, modes=("fwd", "rev"))

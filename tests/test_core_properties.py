@@ -58,7 +58,13 @@ def test_euler_round_trip_generic_and_near_lock(data, seq):
 @pytest.mark.parametrize("seq", ["XYZ", "zxz"])
 @given(q=unit_quaternions(), scale=st.floats(1e-100, 1e100))
 def test_scale_invariance(seq, q, scale):
-    assert_close(rj.quaternion_to_euler(scale * q, seq), rj.quaternion_to_euler(q, seq), atol=1e-13)
+    a_scaled = rj.quaternion_to_euler(scale * q, seq)
+    a = rj.quaternion_to_euler(q, seq)
+    # the same rotation to a few ulp; the angles themselves agree except within rounding of
+    # gimbal lock, where scaling can make the lock exact (then the third angle becomes 0)
+    assert_close(rj.euler_to_matrix(a_scaled, seq), rj.quaternion_to_matrix(q), atol=6 * EPS)
+    if float(rj.euler_singularity(a, seq)) > 1e-6:
+        assert_close(a_scaled, a, atol=1e-13)
     assert_close(rj.quaternion_to_matrix(scale * q), rj.quaternion_to_matrix(q), atol=4 * EPS)
 
 
