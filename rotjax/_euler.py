@@ -119,7 +119,8 @@ def _atan2(y, x):
     size = jnp.dtype(x.dtype).itemsize
     ax, ay = jnp.abs(x), jnp.abs(y)
     swap = ay > ax
-    mn, mx = jnp.minimum(ax, ay), jnp.maximum(ax, ay)
+    # where, not jnp.minimum/maximum: a NaN operand must reach the result.
+    mn, mx = jnp.where(swap, ax, ay), jnp.where(swap, ay, ax)
     big = mn > _TAN_PI_8 * mx
     num = jnp.where(big, mn - mx, mn)
     den = jnp.where(big, mn + mx, mx)
@@ -162,6 +163,19 @@ def _euler_to_quat(a, seq):
     return _multiply(_multiply(q0, q1), q2) if intrinsic else _multiply(_multiply(q2, q1), q0)
 
 
+def _pow2_floor(x):
+    """The power of two with the exponent of ``x > 0`` (its mantissa bits cleared; exact).
+
+    A bit mask rather than ``jnp.frexp``, which handles subnormals and costs as much as the
+    rest of the Euler extraction. Subnormal or zero ``x`` gives 0; infinite and NaN ``x`` give
+    infinity: callers must treat non-finite inputs themselves.
+    """
+    ity = {4: jnp.uint32, 8: jnp.uint64}[jnp.dtype(x.dtype).itemsize]
+    mask = {4: 0x7F800000, 8: 0x7FF0000000000000}[jnp.dtype(x.dtype).itemsize]
+    bits = jax.lax.bitcast_convert_type(x, ity) & jnp.asarray(mask, dtype=ity)
+    return jax.lax.bitcast_convert_type(bits, x.dtype)
+
+
 def _hypot(u, v):
     """``sqrt(u^2 + v^2)`` with a finite (zero) gradient at the origin (double where).
 
@@ -179,6 +193,14 @@ def _quat_to_euler(q, seq):
     ``q`` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
     """
     axes, intrinsic = parse_seq(seq)
+    # Scale by a power of two (exact) so that the largest component is in [0.5, 1): the
+    # products A conj(C) and A C below then cannot underflow, whatever the norm of q.
+    # (Elementwise maxima, not jnp.max: XLA:CPU splits a reduction into loops of its own.)
+    q_in = q
+    aq = [jnp.abs(q[..., n]) for n in range(4)]
+    big = jnp.maximum(jnp.maximum(aq[0], aq[1]), jnp.maximum(aq[2], aq[3]))
+    # (A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
+    q = q * (1 / _pow2_floor(jax.lax.stop_gradient(big)))[..., None]
     # The algorithm is stated for extrinsic sequences; an intrinsic sequence equals the reversed
     # extrinsic one with the angles in reverse order.
     i, j, k = axes[::-1] if intrinsic else axes
@@ -197,16 +219,27 @@ def _quat_to_euler(q, seq):
     # (no wrap), and one rounding less than subtracting two atan2 results.
     # Exactly at gimbal lock only one combination of the outer angles is defined. There the
     # angle that ends up *third* in the output is set to 0, as scipy does; this is an equality
-    # test, not a threshold, so angles near lock keep the exact (threshold-free) formula. The
+    # test (up to underflow), not a threshold, so angles near lock keep the exact formula. The
     # zero factor is replaced by (the conjugate of) the other one, which gives exactly that:
     # e.g. C := conj(A) turns arg(A conj(C)) into 2 arg(A) and arg(A C) into arg(|A|^2) = 0.
-    lock_sum = (c == 0) & (d == 0)  # middle angle at 0 (proper) / +pi/2 (Tait-Bryan)
-    lock_diff = (a == 0) & (b == 0)  # middle angle at pi (proper) / -pi/2 (Tait-Bryan)
+    # "Zero" means below 4x the smallest normal number: q is scaled so that the other factor
+    # is at least 0.35, so every product with it stays normal (XLA:CPU flushes subnormals to
+    # zero, which would otherwise leave atan2(0, 0) for a C of 1e-310). The rotation moves by
+    # less than 1e-307 rad (float64) / 5e-38 rad (float32) against the exact formula.
+    tiny = 4 * float(jnp.finfo(q.dtype).tiny)
+    lock_sum = jnp.maximum(jnp.abs(c), jnp.abs(d)) < tiny  # mid 0 (proper) / +pi/2 (Tait-Bryan)
+    lock_diff = jnp.maximum(jnp.abs(a), jnp.abs(b)) < tiny  # mid pi (proper) / -pi/2 (T-B)
     flip = 1 if intrinsic else -1  # extrinsic keeps `first`, intrinsic keeps `third`
     c, d = jnp.where(lock_sum, a, c), jnp.where(lock_sum, flip * b, d)
     a, b = jnp.where(lock_diff, c, a), jnp.where(lock_diff, flip * d, b)
     first = _atan2(b * c - a * d, a * c + b * d)
     third = _atan2(b * c + a * d, a * c - b * d)
+    # The substitution makes the zeroed angle an atan2 of (x - x, ...), which a fused
+    # multiply-add can leave at a rounding error instead of 0: set it exactly.
+    if intrinsic:
+        first = jnp.where(lock_sum | lock_diff, 0.0, first)
+    else:
+        third = jnp.where(lock_sum | lock_diff, 0.0, third)
     if not proper:
         third = sign * third
         mid = mid - np.pi / 2
@@ -214,10 +247,11 @@ def _quat_to_euler(q, seq):
     # Stacked on a leading axis and moved last: XLA:CPU then evaluates each angle in a loop of
     # its own and transposes, rather than switching between the three per output element.
     out = jnp.moveaxis(jnp.stack(out, axis=0), 0, -1)
-    # NaN for the zero quaternion rather than a valid-looking rotation.
-    x, y, z, w = (q[..., n] for n in range(4))
-    zero = (x * x + y * y + z * z + w * w) == 0  # not jnp.sum: see the stacking note above
-    return jnp.where(zero[..., None], jnp.nan, out)
+    # NaN for the zero quaternion rather than a valid-looking rotation, and for a NaN or
+    # infinite component (the power-of-two scaling would otherwise zero the finite ones).
+    x, y, z, w = (q_in[..., n] for n in range(4))
+    n2 = x * x + y * y + z * z + w * w  # a scalar sum, not jnp.sum: see _hypot
+    return jnp.where(((n2 == 0) | ~jnp.isfinite(n2))[..., None], jnp.nan, out)
 
 
 @public
@@ -280,10 +314,13 @@ def quaternion_to_euler(q, seq: str, degrees: bool = False, scalar_first: bool =
         Every angle is an atan2 of exact polynomial expressions in ``q``: no ``asin``/``acos``
         and no gimbal-lock threshold, so the angles reproduce the rotation to a few eps
         everywhere, at and near gimbal lock included (scipy switches formula at a 1e-7
-        threshold, which moves the rotation by up to ~2e-7 rad).
+        threshold, which moves the rotation by up to ~2e-7 rad). The atan2 is a branch-free
+        polynomial within about 1 ulp of the correctly rounded value, with the exact
+        derivative.
 
         *At exact gimbal lock* (middle angle 0 or pi for proper sequences, +-pi/2 for
-        Tait-Bryan) only the sum or difference of the outer angles is defined. The third angle
+        Tait-Bryan; "exact" up to underflow: within 1e-307 rad in float64, 5e-38 rad in
+        float32) only the sum or difference of the outer angles is defined. The third angle
         is then returned as 0 and the first carries the whole rotation, like scipy.
 
         *Gradient rule.* Near lock the gradient is the true derivative (it grows like
