@@ -24,7 +24,8 @@ EPS = np.finfo(np.float64).eps
 def test_quaternion_matrix_round_trip(q):
     R = rj.quaternion_to_matrix(q)
     assert_same_rotation(rj.matrix_to_quaternion(R), q, atol=4 * EPS)
-    assert_close(np.asarray(R) @ np.asarray(R).T, np.eye(3), atol=4 * EPS)
+    # R itself is within 3 ulp per entry (mpmath tests); the product adds up to ~3 more roundings
+    assert_close(np.asarray(R) @ np.asarray(R).T, np.eye(3), atol=8 * EPS)
     assert float(rj.matrix_to_quaternion(R)[3]) >= 0
 
 
