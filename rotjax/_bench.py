@@ -258,6 +258,27 @@ def _integrator():
     return integrate_angular_velocity
 
 
+def _quaternion_reader_peers(peers, scipy_as: str, jaxlie_read):
+    """Peer contenders for an operation that reads a scalar-last quaternion: scipy and jax.scipy
+    through ``Rotation.from_quat(q).<scipy_as>()``, jaxlie through ``jaxlie_read(SO3(wxyz))``."""
+    import jax
+    import jax.numpy as jnp
+
+    out = []
+    if "jax.scipy" in peers:
+        out.append(
+            ("jax.scipy", "", lambda q: getattr(peers["jax.scipy"].from_quat(q), scipy_as)(), True)
+        )
+    if "jaxlie" in peers:
+        SO3 = peers["jaxlie"].SO3
+        out.append(
+            ("jaxlie", "", lambda q: jax.vmap(lambda v: jaxlie_read(SO3(jnp.roll(v, 1))))(q), True)
+        )
+    if "scipy" in peers:
+        out.append(("scipy", "", lambda q: getattr(peers["scipy"].from_quat(q), scipy_as)(), False))
+    return out
+
+
 def _contenders(op, peers):
     """``[(impl, method, batch_fn, jax_traceable)]`` for an operation.
 
@@ -307,35 +328,10 @@ def _contenders(op, peers):
             out.append(("scipy", "", lambda R, s=seq: R_.from_matrix(R).as_euler(s), False))
     elif op == "quaternion_to_matrix":
         out.append(("rotjax", "", lambda q: rj.quaternion_to_matrix(q), True))
-        if "jax.scipy" in peers:
-            out.append(
-                ("jax.scipy", "", lambda q: peers["jax.scipy"].from_quat(q).as_matrix(), True)
-            )
-        if "jaxlie" in peers:
-            SO3 = peers["jaxlie"].SO3
-            out.append(
-                (
-                    "jaxlie",
-                    "",
-                    lambda q: jax.vmap(lambda v: SO3(jnp.roll(v, 1)).as_matrix())(q),
-                    True,
-                )
-            )
-        if "scipy" in peers:
-            out.append(("scipy", "", lambda q: peers["scipy"].from_quat(q).as_matrix(), False))
+        out += _quaternion_reader_peers(peers, "as_matrix", lambda r: r.as_matrix())
     elif op == "quaternion_to_rotvec":
         out.append(("rotjax", "", lambda q: rj.quaternion_to_rotvec(q), True))
-        if "jax.scipy" in peers:
-            out.append(
-                ("jax.scipy", "", lambda q: peers["jax.scipy"].from_quat(q).as_rotvec(), True)
-            )
-        if "jaxlie" in peers:
-            SO3 = peers["jaxlie"].SO3
-            out.append(
-                ("jaxlie", "", lambda q: jax.vmap(lambda v: SO3(jnp.roll(v, 1)).log())(q), True)
-            )
-        if "scipy" in peers:
-            out.append(("scipy", "", lambda q: peers["scipy"].from_quat(q).as_rotvec(), False))
+        out += _quaternion_reader_peers(peers, "as_rotvec", lambda r: r.log())
     elif op == "rotvec_to_quaternion":
         out.append(("rotjax", "", lambda v: rj.rotvec_to_quaternion(v), True))
         if "jax.scipy" in peers:
