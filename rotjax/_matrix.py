@@ -39,32 +39,17 @@ def _k4_columns(R):
     return cols, (dx, dy, dz, dw)
 
 
-def _shepperd_column(R):
-    """Largest-diagonal column of ``K`` (unnormalised ``4 q_i q``), chosen with nested where.
-
-    Nested ``jnp.where`` fuses into one XLA loop; an argmax + gather was measured slower and a
-    one-hot product turns ``0 * inf`` into NaN.
-    """
-    cols, (dx, dy, dz, dw) = _k4_columns(R)
-    use_x = (dx >= dy) & (dx >= dz) & (dx >= dw)
-    use_y = (dy >= dz) & (dy >= dw)
-    use_z = dz >= dw
-    comps = []
-    for c in range(4):
-        v = jnp.where(use_z, cols[2][c], cols[3][c])
-        v = jnp.where(use_y, cols[1][c], v)
-        v = jnp.where(use_x, cols[0][c], v)
-        comps.append(v)
-    return jnp.stack(comps, axis=-1), cols
-
-
 def _positive_w(q):
     """Choose the ``w >= 0`` hemisphere (both signs are the same rotation)."""
     return jnp.where(q[..., 3:] < 0, -q, q)
 
 
 def _select(masks, vals):
-    """``vals[i]`` for the first true mask ``(use_x, use_y, use_z)``, else ``vals[3]``."""
+    """``vals[i]`` for the first true mask ``(use_x, use_y, use_z)``, else ``vals[3]``.
+
+    Nested ``jnp.where`` fuses into the surrounding XLA loop; an argmax + gather was measured
+    slower, and a one-hot product turns ``0 * inf`` into NaN.
+    """
     use_x, use_y, use_z = masks
     v = jnp.where(use_z, vals[2], vals[3])
     v = jnp.where(use_y, vals[1], v)
@@ -127,20 +112,21 @@ def _unit(v):
     return v / jnp.sqrt(jnp.sum(v * v, axis=-1, keepdims=True))
 
 
-def _matvec_k(cols, v):
-    """``K @ v`` with ``K`` given by its (symmetric) columns."""
-    return sum(jnp.stack(cols[i], axis=-1) * v[..., i : i + 1] for i in range(4))
-
-
 def _from_matrix(R, method: str):
     if method == "shepperd":
         return _shepperd(R)
     if method == "markley":
-        v, cols = _shepperd_column(R)
+        q0 = _shepperd(R)
+        cols, _ = _k4_columns(R)
         # One power-iteration step with K = 4 q q^T (+ noise): its eigenvalues are 4, 0, 0, 0 for a
         # rotation, so one product removes the O(sigma) error of the column and leaves O(sigma^2).
-        v = _matvec_k(cols, _unit(v))
-    elif method == "optimal":
+        # Per-rotation scalar expressions stacked on a leading axis, as in _shepperd (K is
+        # symmetric, so K q is the sum of its columns weighted by q).
+        v = [sum(cols[i][c] * q0[..., i] for i in range(4)) for c in range(4)]
+        s = lax.rsqrt(sum(x * x for x in v))
+        s = jnp.where(v[3] < 0, -s, s)  # the w >= 0 hemisphere
+        return jnp.moveaxis(jnp.stack(v, axis=0) * s, 0, -1)
+    if method == "optimal":
         cols, _ = _k4_columns(R)
         K = jnp.stack([jnp.stack(c, axis=-1) for c in cols], axis=-1)
         # Bar-Itzhack 2000: the top eigenvector of the symmetric K is the quaternion of the
