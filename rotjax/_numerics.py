@@ -79,13 +79,6 @@ def safe_atan2(y, x):
     return jnp.where(zero, 0.0, jnp.arctan2(jnp.where(zero, 0.0, y), jnp.where(zero, 1.0, x)))
 
 
-def wrap_angle(a):
-    """Wrap angles into ``[-pi, pi]`` (inputs in ``[-3 pi, 3 pi]``)."""
-    two_pi = 2 * np.pi
-    a = jnp.where(a > np.pi, a - two_pi, a)
-    return jnp.where(a < -np.pi, a + two_pi, a)
-
-
 def cross(a, b):
     """Cross product over the last axis (broadcasting)."""
     a0, a1, a2 = jnp.moveaxis(a, -1, 0)
