@@ -99,13 +99,8 @@ def test_dtype_preserved(name, dtype):
     "name", ["quaternion_to_matrix", "quaternion_to_euler", "rotvec_to_matrix"]
 )
 def test_integers_promote_to_float(name):
-    f, _, nd = UNARY[name]
-    x = np.zeros(
-        (2, 3)
-        if nd == 1 and name != "quaternion_to_matrix" and name != "quaternion_to_euler"
-        else (2, 4),
-        int,
-    )
+    f, x, _ = UNARY[name]
+    x = np.zeros((2, x.shape[-1]), int)  # same trailing shape as the float input
     x[..., -1] = 1
     out = f(x)
     assert jnp.issubdtype(out.dtype, jnp.floating)

@@ -8,7 +8,6 @@ from helpers import (
     assert_close,
     assert_same_rotation,
     euler_angles,
-    is_proper,
     lock_middles,
     unit_quaternions,
 )
@@ -82,7 +81,3 @@ def test_composition_and_angle(p, q):
     assert 0 <= ang <= np.pi
     assert_close(ang, float(rj.angle_between(q, p)), atol=8 * EPS)
     assert_close(ang, float(rj.angle_between(-p, q)), atol=0)
-
-
-def test_proper_helper_consistent():
-    assert is_proper("ZXZ") and not is_proper("XYZ")
