@@ -109,6 +109,13 @@ _QUARTER_PI = {  # (hi, lo) of k pi/4, k = 0..4, rounded to float32 / float64
 _TAN_PI_8 = 0.41421356237309503
 
 
+def _signbit(x):
+    """``jnp.signbit`` as a signed integer comparison (XLA lowers signbit to a 64-bit shift,
+    which kept LLVM from vectorizing the float64 loop)."""
+    ity = {4: jnp.int32, 8: jnp.int64}[jnp.dtype(x.dtype).itemsize]
+    return jax.lax.bitcast_convert_type(x, ity) < 0
+
+
 @jax.custom_jvp
 def _atan2(y, x):
     """``atan2(y, x)`` for float32/float64, branch-free; 0 (not NaN) at ``x = y = 0``.
@@ -130,7 +137,7 @@ def _atan2(y, x):
     for c in _ATAN_P[size][1:]:
         p = p * s + c
     r = u + u * (s * p)
-    xneg = jnp.signbit(x)
+    xneg = _signbit(x)
     k = jnp.where(big, 1, 0)
     k = jnp.where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
     k = jnp.where(xneg, 4 - k, k)  # pi - (...) for x < 0
@@ -144,7 +151,7 @@ def _atan2(y, x):
         return jnp.where(k == 4, vals[4], v).astype(x.dtype)
 
     a = octant(hi) + (octant(lo) + sign * r)
-    a = jnp.where(jnp.signbit(y), -a, a)
+    a = jnp.where(_signbit(y), -a, a)
     return jnp.where((ax == 0) & (ay == 0), jnp.zeros_like(a), a)
 
 
@@ -163,17 +170,21 @@ def _euler_to_quat(a, seq):
     return _multiply(_multiply(q0, q1), q2) if intrinsic else _multiply(_multiply(q2, q1), q0)
 
 
-def _pow2_floor(x):
-    """The power of two with the exponent of ``x > 0`` (its mantissa bits cleared; exact).
+def _inv_pow2(x):
+    """``2^-e`` for the exponent ``e`` of ``x`` (``x = m 2^e``, ``1 <= m < 2``), exactly.
 
-    A bit mask rather than ``jnp.frexp``, which handles subnormals and costs as much as the
-    rest of the Euler extraction. Subnormal or zero ``x`` gives 0; infinite and NaN ``x`` give
-    infinity: callers must treat non-finite inputs themselves.
+    Integer arithmetic on the exponent field rather than ``1 / 2^e`` or ``jnp.frexp`` (a
+    division or frexp costs as much as the rest of the Euler extraction, and keeps XLA from
+    fusing the scaling into its consumers). Meaningful for normal ``x`` with ``e < emax``; the
+    caller returns NaN where the scaled values would not be (zero, subnormal, infinite, NaN).
     """
+    info = jnp.finfo(x.dtype)
     ity = {4: jnp.uint32, 8: jnp.uint64}[jnp.dtype(x.dtype).itemsize]
-    mask = {4: 0x7F800000, 8: 0x7FF0000000000000}[jnp.dtype(x.dtype).itemsize]
-    bits = jax.lax.bitcast_convert_type(x, ity) & jnp.asarray(mask, dtype=ity)
-    return jax.lax.bitcast_convert_type(bits, x.dtype)
+    mant = info.nmant
+    bias = (1 << (info.nexp - 1)) - 1
+    exp_mask = ((1 << info.nexp) - 1) << mant
+    field = jax.lax.bitcast_convert_type(x, ity) & jnp.asarray(exp_mask, dtype=ity)
+    return jax.lax.bitcast_convert_type(jnp.asarray(2 * bias << mant, dtype=ity) - field, x.dtype)
 
 
 def _hypot(u, v):
@@ -193,14 +204,14 @@ def _quat_to_euler(q, seq):
     ``q`` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
     """
     axes, intrinsic = parse_seq(seq)
-    # Scale by a power of two (exact) so that the largest component is in [0.5, 1): the
+    # Scale by a power of two (exact) so that the largest component is in [1, 2): the
     # products A conj(C) and A C below then cannot underflow, whatever the norm of q.
     # (Elementwise maxima, not jnp.max: XLA:CPU splits a reduction into loops of its own.)
     q_in = q
     aq = [jnp.abs(q[..., n]) for n in range(4)]
     big = jnp.maximum(jnp.maximum(aq[0], aq[1]), jnp.maximum(aq[2], aq[3]))
     # (A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
-    q = q * (1 / _pow2_floor(jax.lax.stop_gradient(big)))[..., None]
+    q = q * _inv_pow2(jax.lax.stop_gradient(big))[..., None]
     # The algorithm is stated for extrinsic sequences; an intrinsic sequence equals the reversed
     # extrinsic one with the angles in reverse order.
     i, j, k = axes[::-1] if intrinsic else axes
@@ -213,7 +224,7 @@ def _quat_to_euler(q, seq):
     else:
         a, b = q[..., 3] - q[..., j], q[..., i] + sign * q[..., k]
         c, d = q[..., j] + q[..., 3], sign * q[..., k] - q[..., i]
-    mid = 2 * _atan2(_hypot(c, d), _hypot(a, b))
+    hyp_cd, hyp_ab = _hypot(c, d), _hypot(a, b)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results.
@@ -227,26 +238,30 @@ def _quat_to_euler(q, seq):
     # zero, which would otherwise leave atan2(0, 0) for a C of 1e-310). The rotation moves by
     # less than 1e-307 rad (float64) / 5e-38 rad (float32) against the exact formula.
     tiny = 4 * float(jnp.finfo(q.dtype).tiny)
-    lock_sum = jnp.maximum(jnp.abs(c), jnp.abs(d)) < tiny  # mid 0 (proper) / +pi/2 (Tait-Bryan)
-    lock_diff = jnp.maximum(jnp.abs(a), jnp.abs(b)) < tiny  # mid pi (proper) / -pi/2 (T-B)
+    # (Two comparisons rather than a jnp.maximum: XLA:CPU did not vectorize float64 maxima.)
+    lock_sum = (jnp.abs(c) < tiny) & (jnp.abs(d) < tiny)  # mid 0 (proper) / +pi/2 (Tait-Bryan)
+    lock_diff = (jnp.abs(a) < tiny) & (jnp.abs(b) < tiny)  # mid pi (proper) / -pi/2 (T-B)
     flip = 1 if intrinsic else -1  # extrinsic keeps `first`, intrinsic keeps `third`
     c, d = jnp.where(lock_sum, a, c), jnp.where(lock_sum, flip * b, d)
     a, b = jnp.where(lock_diff, c, a), jnp.where(lock_diff, flip * d, b)
-    first = _atan2(b * c - a * d, a * c + b * d)
-    third = _atan2(b * c + a * d, a * c - b * d)
-    # The substitution makes the zeroed angle an atan2 of (x - x, ...), which a fused
+    # The three atan2 are evaluated as one, on (..., 3) arrays in the output order: the result
+    # is then written by one elementwise loop (stacking three separate results and moving the
+    # axis last made XLA:CPU emit a transposing loop that LLVM did not vectorize in float64).
+    num = {"first": b * c - a * d, "mid": hyp_cd, "third": b * c + a * d}
+    den = {"first": a * c + b * d, "mid": hyp_ab, "third": a * c - b * d}
+    order = ("third", "mid", "first") if intrinsic else ("first", "mid", "third")
+    ang = _atan2(
+        jnp.stack([num[n] for n in order], axis=-1), jnp.stack([den[n] for n in order], axis=-1)
+    )
+    scale = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(sign)}
+    shift = {"first": 0.0, "mid": 0.0 if proper else -np.pi / 2, "third": 0.0}
+    out = ang * np.array([scale[n] for n in order], dtype=ang.dtype) + np.array(
+        [shift[n] for n in order], dtype=ang.dtype
+    )
+    # The substitution makes the zeroed angle (the last in the output: `first` of an intrinsic
+    # sequence, `third` of an extrinsic one) an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: set it exactly.
-    if intrinsic:
-        first = jnp.where(lock_sum | lock_diff, 0.0, first)
-    else:
-        third = jnp.where(lock_sum | lock_diff, 0.0, third)
-    if not proper:
-        third = sign * third
-        mid = mid - np.pi / 2
-    out = (third, mid, first) if intrinsic else (first, mid, third)
-    # Stacked on a leading axis and moved last: XLA:CPU then evaluates each angle in a loop of
-    # its own and transposes, rather than switching between the three per output element.
-    out = jnp.moveaxis(jnp.stack(out, axis=0), 0, -1)
+    out = jnp.where((lock_sum | lock_diff)[..., None] & np.array([False, False, True]), 0.0, out)
     # NaN for the zero quaternion rather than a valid-looking rotation, and for a NaN or
     # infinite component (the power-of-two scaling would otherwise zero the finite ones).
     x, y, z, w = (q_in[..., n] for n in range(4))
