@@ -109,13 +109,6 @@ _QUARTER_PI = {  # (hi, lo) of k pi/4, k = 0..4, rounded to float32 / float64
 _TAN_PI_8 = 0.41421356237309503
 
 
-def _signbit(x):
-    """``jnp.signbit`` as a signed integer comparison (XLA lowers signbit to a 64-bit shift,
-    which kept LLVM from vectorizing the float64 loop)."""
-    ity = {4: jnp.int32, 8: jnp.int64}[jnp.dtype(x.dtype).itemsize]
-    return jax.lax.bitcast_convert_type(x, ity) < 0
-
-
 @jax.custom_jvp
 def _atan2(y, x):
     """``atan2(y, x)`` for float32/float64, branch-free; 0 (not NaN) at ``x = y = 0``.
@@ -137,7 +130,7 @@ def _atan2(y, x):
     for c in _ATAN_P[size][1:]:
         p = p * s + c
     r = u + u * (s * p)
-    xneg = _signbit(x)
+    xneg = jnp.signbit(x)
     k = jnp.where(big, 1, 0)
     k = jnp.where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
     k = jnp.where(xneg, 4 - k, k)  # pi - (...) for x < 0
@@ -151,7 +144,7 @@ def _atan2(y, x):
         return jnp.where(k == 4, vals[4], v).astype(x.dtype)
 
     a = octant(hi) + (octant(lo) + sign * r)
-    a = jnp.where(_signbit(y), -a, a)
+    a = jnp.where(jnp.signbit(y), -a, a)
     return jnp.where((ax == 0) & (ay == 0), jnp.zeros_like(a), a)
 
 
