@@ -231,7 +231,6 @@ def _quat_to_euler(q, seq):
     # zero, which would otherwise leave atan2(0, 0) for a C of 1e-310). The rotation moves by
     # less than 1e-307 rad (float64) / 5e-38 rad (float32) against the exact formula.
     tiny = 4 * float(jnp.finfo(q.dtype).tiny)
-    # (Two comparisons rather than a jnp.maximum: XLA:CPU did not vectorize float64 maxima.)
     lock_sum = (jnp.abs(c) < tiny) & (jnp.abs(d) < tiny)  # mid 0 (proper) / +pi/2 (Tait-Bryan)
     lock_diff = (jnp.abs(a) < tiny) & (jnp.abs(b) < tiny)  # mid pi (proper) / -pi/2 (T-B)
     flip = 1 if intrinsic else -1  # extrinsic keeps `first`, intrinsic keeps `third`
