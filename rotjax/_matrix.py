@@ -65,6 +65,22 @@ def _selected_column(R):
     return c, sum(x * x for x in c)
 
 
+def _hemisphere_scale(v, sq):
+    """``1 / |v|`` (``sq = |v|^2``), negated where ``w < 0``: ``v * scale`` is the unit
+    quaternion with ``w >= 0``."""
+    s = lax.rsqrt(sq)
+    return jnp.where(v[3] < 0, -s, s)
+
+
+def _stack_last(v, scale):
+    """``(..., 4)`` from four per-rotation components times a per-rotation scale.
+
+    Stacked on a leading axis and moved last: XLA:CPU emits one transposing loop (stacking on
+    the last axis directly was 2.5x slower in float32).
+    """
+    return jnp.moveaxis(jnp.stack(v, axis=0) * scale, 0, -1)
+
+
 @jax.custom_jvp
 def _shepperd(R):
     """Shepperd extraction, scalar last, ``w >= 0``: the selected column of ``K`` over its norm.
@@ -79,9 +95,7 @@ def _shepperd(R):
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
-    s = lax.rsqrt(sq)
-    s = jnp.where(c[3] < 0, -s, s)  # the w >= 0 hemisphere
-    return jnp.moveaxis(jnp.stack(c, axis=0) * s, 0, -1)
+    return _stack_last(c, _hemisphere_scale(c, sq))
 
 
 @_shepperd.defjvp
@@ -124,6 +138,61 @@ def _shepperd_jvp(primals, tangents):
     return q, dq
 
 
+def _k_times(cols, p):
+    """``K p`` for the symmetric ``K`` given by its columns, on per-rotation components."""
+    return [sum(cols[i][c] * p[i] for i in range(4)) for c in range(4)]
+
+
+@jax.custom_jvp
+def _markley(R):
+    """Shepperd's quaternion refined by one power-iteration step with ``K``, ``w >= 0``.
+
+    ``K = 4 q q^T`` (+ noise) has eigenvalues 4, 0, 0, 0 for a rotation, so one product removes
+    the O(sigma) error of the selected column and leaves O(sigma^2). Per-rotation scalar
+    expressions throughout, as in :func:`_shepperd` (the Shepperd quaternion is not stacked
+    and unstacked in between: that cost a transposing loop).
+    """
+    c, sq = _selected_column(R)
+    s0 = _hemisphere_scale(c, sq)
+    cols, _ = _k4_columns(R)
+    v = _k_times(cols, [x * s0 for x in c])
+    return _stack_last(v, _hemisphere_scale(v, sum(x * x for x in v)))
+
+
+@_markley.defjvp
+def _markley_jvp(primals, tangents):
+    # The exact derivative of the formula (the Shepperd step with its tangent-space rule), by
+    # hand so that reverse mode compiles to few loops (measured 2.6x faster than JAX's own
+    # transposition of the forward code):
+    # dv = K(R) dq0 + dK q0, where dK q0 = sum_kj M_c[k, j](q0) dR[k, j] (M_c read off K's
+    # columns, linear in R); then q = v / |v| gives dq = (I - q q^T) dv / |v|. As in
+    # _shepperd_jvp, dR enters through elementwise products only, and dv is divided by the
+    # signed norm (a division that XLA does not recompute inside each consumer).
+    (R,), (dR,) = primals, tangents
+    q0, dq0 = jax.jvp(_shepperd, (R,), (dR,))
+    cols, _ = _k4_columns(R)
+    px, py, pz, pw = (q0[..., i] for i in range(4))
+    v = _k_times(cols, [px, py, pz, pw])
+    n = jnp.sqrt(sum(x * x for x in v))
+    n = jnp.where(v[3] < 0, -n, n)
+
+    def mat(rows):
+        return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+
+    m = (
+        mat([[px, py, pz], [py, -px, -pw], [pz, pw, -px]]),
+        mat([[-py, px, pw], [px, py, pz], [-pw, pz, -py]]),
+        mat([[-pz, -pw, px], [pw, -pz, py], [px, py, pz]]),
+        mat([[pw, -pz, py], [pz, pw, -px], [-py, px, pw]]),
+    )
+    dk = _k_times(cols, [dq0[..., i] for i in range(4)])
+    dv = jnp.stack([dk[c] + jnp.sum(m[c] * dR, axis=(-2, -1)) for c in range(4)], axis=0)
+    w = dv / jnp.stack([n] * 4, axis=0)
+    q = [x / n for x in v]
+    qw = sum(q[c] * w[c] for c in range(4))
+    return _markley(R), jnp.stack([w[c] - q[c] * qw for c in range(4)], axis=-1)
+
+
 def _unit(v):
     return v / jnp.sqrt(jnp.sum(v * v, axis=-1, keepdims=True))
 
@@ -132,16 +201,7 @@ def _from_matrix(R, method: str):
     if method == "shepperd":
         return _shepperd(R)
     if method == "markley":
-        q0 = _shepperd(R)
-        cols, _ = _k4_columns(R)
-        # One power-iteration step with K = 4 q q^T (+ noise): its eigenvalues are 4, 0, 0, 0 for a
-        # rotation, so one product removes the O(sigma) error of the column and leaves O(sigma^2).
-        # Per-rotation scalar expressions stacked on a leading axis, as in _shepperd (K is
-        # symmetric, so K q is the sum of its columns weighted by q).
-        v = [sum(cols[i][c] * q0[..., i] for i in range(4)) for c in range(4)]
-        s = lax.rsqrt(sum(x * x for x in v))
-        s = jnp.where(v[3] < 0, -s, s)  # the w >= 0 hemisphere
-        return jnp.moveaxis(jnp.stack(v, axis=0) * s, 0, -1)
+        return _markley(R)
     if method == "optimal":
         cols, _ = _k4_columns(R)
         K = jnp.stack([jnp.stack(c, axis=-1) for c in cols], axis=-1)
@@ -188,7 +248,8 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
         of the ``"optimal"`` quaternion. So the gradient of a loss with respect to a free 3x3
         matrix is not that of the raw Shepperd formula (which would also react to scaling and
         shear); compose with an explicit projection if that is what you need. For
-        ``"markley"`` the gradient is that of the selected branch and the power step. For
+        ``"markley"`` the gradient is the exact derivative of the power step applied to the
+        Shepperd quaternion (with the rule above for the latter). For
         ``"optimal"`` the gradient is that of ``eigh``, finite while the top
         eigenvalue is simple (always, for matrices near a rotation).
     """
