@@ -717,7 +717,7 @@ def run(quick: bool, out_dir: Path, ops=None) -> list[dict]:
 
     peers = _peers()
     n = 1 << (16 if quick else 20)
-    rounds = 3 if quick else 9
+    rounds = 3 if quick else 21  # medians of per-round ratios: enough rounds to outvote bursts
     n_acc = 8 if quick else 96
     per_seq = 4 if quick else 8
     # Accuracy of Euler extraction: every sequence in a full run, a spread of six in --quick.
