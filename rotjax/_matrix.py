@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from ._numerics import as_float, check_shape, from_scalar_last, public, top_eigenvector
@@ -98,21 +99,23 @@ def _shepperd(R):
     return _stack_last(c, _hemisphere_scale(c, sq))
 
 
-@_shepperd.defjvp
-def _shepperd_jvp(primals, tangents):
-    # Tangent-space rule: with dR = R hat(v) on SO(3), dq = 1/2 q (x) (v, 0), v = vee(R^T dR).
-    # Off the tangent space, dR is projected onto it through R^T: at a rotation matrix this is
-    # the derivative of the nearest-rotation quaternion ("optimal").
-    #
-    # The code is arranged for reverse mode, where JAX transposes it (measured: jit(grad) went
-    # from 12 XLA loops to 2):
-    # * dR enters only through elementwise products with three (..., 3, 3) arrays built from R
-    #   (v = 1/2 sum_k dR_k x R_k, row by row), whose transpose is one elementwise loop that
-    #   writes the whole cotangent of R;
-    # * v is divided by the signed column norm last, so in the transpose the cotangent of v ends
-    #   in a division, which XLA does not recompute inside each of the nine consumers.
-    (R,), (dR,) = primals, tangents
-    q = _shepperd(R)
+def _shepperd_tangent(R, dR):
+    """The selected column ``c``, its squared norm, and the four components of the Shepperd
+    quaternion's tangent ``dq`` (per-rotation arrays) for a tangent ``dR``.
+
+    Tangent-space rule: with dR = R hat(v) on SO(3), dq = 1/2 q (x) (v, 0), v = vee(R^T dR).
+    Off the tangent space, dR is projected onto it through R^T: at a rotation matrix this is
+    the derivative of the nearest-rotation quaternion ("optimal").
+
+    The code is arranged for reverse mode, where JAX transposes it (measured: jit(grad) went
+    from 12 XLA loops to 2):
+
+    * dR enters only through elementwise products with three (..., 3, 3) arrays built from R
+      (v = 1/2 sum_k dR_k x R_k, row by row), whose transpose is one elementwise loop that
+      writes the whole cotangent of R;
+    * v is divided by the signed column norm last, so in the transpose the cotangent of v ends
+      in a division, which XLA does not recompute inside each of the nine consumers.
+    """
     c, sq = _selected_column(R)
     n = jnp.sqrt(sq)
     n = 4.0 * jnp.where(c[3] < 0, -n, n)  # q = c / (n / 4); the 1/2 of v and of dq folded in
@@ -126,16 +129,37 @@ def _shepperd_jvp(primals, tangents):
     v = jnp.stack([jnp.sum(a * dR, axis=(-2, -1)) for a in rows], axis=0)
     vx, vy, vz = v / jnp.stack([n, n, n], axis=0)
     x, y, z, w = c
-    dq = jnp.stack(
-        [
-            w * vx + y * vz - z * vy,
-            w * vy + z * vx - x * vz,
-            w * vz + x * vy - y * vx,
-            -(x * vx + y * vy + z * vz),
-        ],
-        axis=-1,
-    )
-    return q, dq
+    dq = [
+        w * vx + y * vz - z * vy,
+        w * vy + z * vx - x * vz,
+        w * vz + x * vy - y * vx,
+        -(x * vx + y * vy + z * vz),
+    ]
+    return c, sq, dq
+
+
+@_shepperd.defjvp
+def _shepperd_jvp(primals, tangents):
+    (R,), (dR,) = primals, tangents
+    _, _, dq = _shepperd_tangent(R, dR)
+    return _shepperd(R), jnp.stack(dq, axis=-1)
+
+
+def _dk_pattern():
+    """``S[c, a]`` (3x3) with ``(dK p)_c = sum_kj (sum_a p_a S[c, a])[k, j] dR[k, j]``, read off
+    :func:`_k4_columns` (``K`` is affine in ``R``) by evaluating it on unit matrices."""
+    out = np.zeros((4, 4, 3, 3))
+    for k in range(3):
+        for j in range(3):
+            e = np.zeros((3, 3))
+            e[k, j] = 1.0
+            cols, _ = _k4_columns(e)
+            lin = np.array([[float(x) for x in col] for col in cols]) - np.eye(4)  # dK/dR[k, j]
+            out[:, :, k, j] = lin.T  # (dK p)_c = sum_a dK[c, a] p_a; dK symmetric
+    return out
+
+
+_DK_PATTERN = _dk_pattern()
 
 
 def _k_times(cols, p):
@@ -169,26 +193,24 @@ def _markley_jvp(primals, tangents):
     # _shepperd_jvp, dR enters through elementwise products only, and dv is divided by the
     # signed norm (a division that XLA does not recompute inside each consumer).
     (R,), (dR,) = primals, tangents
-    q0, dq0 = jax.jvp(_shepperd, (R,), (dR,))
+    c, sq, dq0 = _shepperd_tangent(R, dR)
+    s0 = _hemisphere_scale(c, sq)
     cols, _ = _k4_columns(R)
-    px, py, pz, pw = (q0[..., i] for i in range(4))
+    px, py, pz, pw = (x * s0 for x in c)
     v = _k_times(cols, [px, py, pz, pw])
     n = jnp.sqrt(sum(x * x for x in v))
     n = jnp.where(v[3] < 0, -n, n)
 
-    def mat(rows):
-        return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
-
-    m = (
-        mat([[px, py, pz], [py, -px, -pw], [pz, pw, -px]]),
-        mat([[-py, px, pw], [px, py, pz], [-pw, pz, -py]]),
-        mat([[-pz, -pw, px], [pw, -pz, py], [px, py, pz]]),
-        mat([[pw, -pz, py], [pz, pw, -px], [-py, px, pw]]),
-    )
-    dk = _k_times(cols, [dq0[..., i] for i in range(4)])
+    # M_c = sum_a p_a S[c, a]: a broadcast against constant sign patterns, which XLA fuses
+    # into the loop that consumes it (stacking the entries made it materialise them).
+    p = (px, py, pz, pw)
+    pat = _DK_PATTERN.astype(R.dtype)
+    m = [sum(p[a][..., None, None] * pat[c, a] for a in range(4)) for c in range(4)]
+    dk = _k_times(cols, dq0)
     dv = jnp.stack([dk[c] + jnp.sum(m[c] * dR, axis=(-2, -1)) for c in range(4)], axis=0)
     w = dv / jnp.stack([n] * 4, axis=0)
-    q = [x / n for x in v]
+    inv = 1 / n
+    q = [x * inv for x in v]
     qw = sum(q[c] * w[c] for c in range(4))
     return _markley(R), jnp.stack([w[c] - q[c] * qw for c in range(4)], axis=-1)
 

@@ -310,3 +310,17 @@ def test_markley_hand_written_derivative_equals_autodiff_of_its_formula(sigma):
     g = jax.grad(lambda m: jnp.sum(w * f(m)))(R)
     g_ref = jax.grad(lambda m: jnp.sum(w * _markley_by_autodiff(m)))(R)
     assert_close(g, g_ref, atol=1e-12 * (1 + float(jnp.abs(g_ref).max())))
+
+
+@pytest.mark.parametrize("method", ["shepperd", "markley", "optimal"])
+def test_matrix_to_quaternion_float32_derivatives_stay_float32(method):
+    """The hand-written derivatives keep the input dtype, in both modes (a float64 constant
+    inside a rule would otherwise promote the tangent and JAX would reject it)."""
+    R = jnp.asarray(rj.quaternion_to_matrix(np.array([0.3, -0.5, 0.2, 0.78])), dtype=jnp.float32)
+    f = lambda m: rj.matrix_to_quaternion(m, method=method)  # noqa: E731
+    _, jv = jax.jvp(f, (R,), (jnp.ones_like(R),))
+    g = jax.grad(lambda m: jnp.sum(f(m)))(R)
+    assert jv.dtype == jnp.float32 and g.dtype == jnp.float32
+    assert np.all(np.isfinite(np.asarray(g)))
+    g64 = jax.grad(lambda m: jnp.sum(f(m)))(R.astype(jnp.float64))
+    assert_close(g, g64, atol=1e-5)
