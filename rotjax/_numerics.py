@@ -90,7 +90,9 @@ def hat(v):
     """Skew-symmetric matrix ``[v]x`` with ``hat(v) @ u == cross(v, u)``; shape ``(..., 3, 3)``."""
     x, y, z = jnp.moveaxis(v, -1, 0)
     o = jnp.zeros_like(x)
-    return jnp.stack([o, -z, y, z, o, -x, -y, x, o], axis=-1).reshape(*v.shape[:-1], 3, 3)
+    rows = ((o, -z, y), (z, o, -x), (-y, x, o))
+    # Nested stacks, not a flat stack of nine: XLA:CPU then writes the matrix in one loop.
+    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 def vee(m):

@@ -67,14 +67,14 @@ def _to_matrix(q):
     xy, xz, yz = s * x * y, s * x * z, s * y * z
     xw, yw, zw = s * x * w, s * y * w, s * z * w
     one = jnp.ones_like(x)
-    return jnp.stack(
-        [
-            one - yy - zz, xy - zw, xz + yw,
-            xy + zw, one - xx - zz, yz - xw,
-            xz - yw, yz + xw, one - xx - yy,
-        ],
-        axis=-1,
-    ).reshape(*q.shape[:-1], 3, 3)  # fmt: skip
+    rows = (
+        (one - yy - zz, xy - zw, xz + yw),
+        (xy + zw, one - xx - zz, yz - xw),
+        (xz - yw, yz + xw, one - xx - yy),
+    )
+    # Three rows of three, stacked twice: XLA:CPU writes the matrix in one loop. A flat stack
+    # of nine became nine loops and a concatenation (1.6x slower in float64).
+    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 def _angle(q):
