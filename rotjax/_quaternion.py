@@ -73,7 +73,8 @@ def _to_matrix(q):
         (xz - yw, yz + xw, one - xx - yy),
     )
     # Three rows of three, stacked twice: XLA:CPU writes the matrix in one loop. A flat stack
-    # of nine became nine loops and a concatenation (1.6x slower in float64).
+    # of nine became nine loops and a concatenation (the benchmark's float64 rate against
+    # jax.scipy's went from 0.69x to 1.00x with this change).
     return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
 
 
