@@ -209,7 +209,7 @@ def _quat_to_euler(q, seq):
     aq = [jnp.abs(q[..., n]) for n in range(4)]
     big = jnp.maximum(jnp.maximum(aq[0], aq[1]), jnp.maximum(aq[2], aq[3]))
     # (A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
-    q = q * _inv_pow2(jax.lax.stop_gradient(big))[..., None]
+    scale = _inv_pow2(jax.lax.stop_gradient(big))
     # The algorithm is stated for extrinsic sequences; an intrinsic sequence equals the reversed
     # extrinsic one with the angles in reverse order.
     i, j, k = axes[::-1] if intrinsic else axes
@@ -222,6 +222,9 @@ def _quat_to_euler(q, seq):
     else:
         a, b = q[..., 3] - q[..., j], q[..., i] + sign * q[..., k]
         c, d = q[..., j] + q[..., 3], sign * q[..., k] - q[..., i]
+    # The scale is applied to a, b, c, d (linear in q; a power of two, so exactly as if applied
+    # to q): XLA:CPU then fuses it instead of writing a scaled copy of q.
+    a, b, c, d = (scale * t for t in (a, b, c, d))
     hyp_cd, hyp_ab = _hypot(c, d), _hypot(a, b)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
