@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -145,21 +147,28 @@ def _shepperd_jvp(primals, tangents):
     return _shepperd(R), jnp.stack(dq, axis=-1)
 
 
+def _unit_matrix(k, j):
+    e = np.zeros((3, 3))
+    e[k, j] = 1.0
+    return e
+
+
+@functools.cache
 def _dk_pattern():
     """``S[c, a]`` (3x3) with ``(dK p)_c = sum_kj (sum_a p_a S[c, a])[k, j] dR[k, j]``, read off
-    :func:`_k4_columns` (``K`` is affine in ``R``) by evaluating it on unit matrices."""
+    :func:`_k4_columns` (``K`` is affine in ``R``) by evaluating it on unit matrices.
+
+    Built on first use (at trace time), not at import: evaluating ``_k4_columns`` runs JAX
+    operations, which would initialise the backend when rotjax is imported."""
     out = np.zeros((4, 4, 3, 3))
+    with jax.ensure_compile_time_eval():  # concrete values, also when first called in a trace
+        cols_of = [[_k4_columns(_unit_matrix(k, j))[0] for j in range(3)] for k in range(3)]
     for k in range(3):
         for j in range(3):
-            e = np.zeros((3, 3))
-            e[k, j] = 1.0
-            cols, _ = _k4_columns(e)
+            cols = cols_of[k][j]
             lin = np.array([[float(x) for x in col] for col in cols]) - np.eye(4)  # dK/dR[k, j]
             out[:, :, k, j] = lin.T  # (dK p)_c = sum_a dK[c, a] p_a; dK symmetric
     return out
-
-
-_DK_PATTERN = _dk_pattern()
 
 
 def _k_times(cols, p):
@@ -205,7 +214,7 @@ def _markley_jvp(primals, tangents):
     # M_c = sum_a p_a S[c, a]: a broadcast against constant sign patterns, which XLA fuses
     # into the loop that consumes it (stacking the entries made it materialise them).
     p = (px, py, pz, pw)
-    pat = _DK_PATTERN.astype(R.dtype)
+    pat = _dk_pattern().astype(R.dtype)
     m = [sum(p[a][..., None, None] * pat[c, a] for a in range(4)) for c in range(4)]
     dk = _k_times(cols, dq0)
     dv = jnp.stack([dk[c] + jnp.sum(m[c] * dR, axis=(-2, -1)) for c in range(4)], axis=0)

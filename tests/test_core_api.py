@@ -269,3 +269,18 @@ def test_zero_quaternion_gives_nan():
         assert np.all(np.isnan(np.asarray(f(z))))
     axis, angle = rj.quaternion_to_axis_angle(z)
     assert np.all(np.isnan(axis)) and np.isnan(angle)
+
+
+def test_import_does_no_jax_work():
+    """Importing rotjax must not initialise a JAX backend: a user may still choose the platform
+    or other start-up options after ``import rotjax``."""
+    import subprocess
+    import sys
+
+    code = (
+        "import jax\n"
+        "from jax._src import xla_bridge\n"
+        "import rotjax\n"
+        "assert not xla_bridge._backends, 'importing rotjax initialised a JAX backend'\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
