@@ -253,9 +253,9 @@ def _quat_to_euler(q, seq):
     ang = _atan2(
         jnp.stack([num[n] for n in order], axis=-1), jnp.stack([den[n] for n in order], axis=-1)
     )
-    scale = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(sign)}
+    factor = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(sign)}
     shift = {"first": 0.0, "mid": 0.0 if proper else -np.pi / 2, "third": 0.0}
-    out = ang * np.array([scale[n] for n in order], dtype=ang.dtype) + np.array(
+    out = ang * np.array([factor[n] for n in order], dtype=ang.dtype) + np.array(
         [shift[n] for n in order], dtype=ang.dtype
     )
     # The substitution makes the zeroed angle (the last in the output: `first` of an intrinsic
