@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -25,7 +23,6 @@ def _k4_columns(R):
     r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
     r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
     r20, r21, r22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
-    one = jnp.ones_like(r00)
     # diagonal of K minus 1: 4x^2-1, 4y^2-1, 4z^2-1, 4w^2-1
     dx = r00 - r11 - r22
     dy = r11 - r00 - r22
@@ -34,10 +31,10 @@ def _k4_columns(R):
     sxy, sxz, syz = r01 + r10, r02 + r20, r12 + r21
     ax, ay, az = r21 - r12, r02 - r20, r10 - r01
     cols = (
-        (one + dx, sxy, sxz, ax),
-        (sxy, one + dy, syz, ay),
-        (sxz, syz, one + dz, az),
-        (ax, ay, az, one + dw),
+        (1.0 + dx, sxy, sxz, ax),
+        (sxy, 1.0 + dy, syz, ay),
+        (sxz, syz, 1.0 + dz, az),
+        (ax, ay, az, 1.0 + dw),
     )
     return cols, (dx, dy, dz, dw)
 
@@ -91,9 +88,9 @@ def _shepperd(R):
     Written for XLA:CPU, measured with ``python -m rotjax bench``: every step is a per-rotation
     scalar expression (no reduction over a stacked axis); the four components are selected
     first and the scale ``rsqrt(|c|^2)`` is computed from them (not from the norms of all four
-    columns); the components are stacked on a leading axis and moved to the end. XLA then emits
-    one loop for the scale and one transposing loop for the components (stacking on the last
-    axis instead was 2.5x slower in float32).
+    columns); the components are stacked on a leading axis and moved to the end
+    (:func:`_stack_last`). XLA then emits one loop for the scale and one transposing loop for
+    the components.
     """
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
@@ -147,28 +144,21 @@ def _shepperd_jvp(primals, tangents):
     return _shepperd(R), jnp.stack(dq, axis=-1)
 
 
-def _unit_matrix(k, j):
-    e = np.zeros((3, 3))
-    e[k, j] = 1.0
-    return e
-
-
-@functools.cache
 def _dk_pattern():
     """``S[c, a]`` (3x3) with ``(dK p)_c = sum_kj (sum_a p_a S[c, a])[k, j] dR[k, j]``, read off
-    :func:`_k4_columns` (``K`` is affine in ``R``) by evaluating it on unit matrices.
-
-    Built on first use (at trace time), not at import: evaluating ``_k4_columns`` runs JAX
-    operations, which would initialise the backend when rotjax is imported."""
+    :func:`_k4_columns` (``K`` is affine in ``R``) by evaluating it, in NumPy, on unit
+    matrices."""
     out = np.zeros((4, 4, 3, 3))
-    with jax.ensure_compile_time_eval():  # concrete values, also when first called in a trace
-        cols_of = [[_k4_columns(_unit_matrix(k, j))[0] for j in range(3)] for k in range(3)]
     for k in range(3):
         for j in range(3):
-            cols = cols_of[k][j]
-            lin = np.array([[float(x) for x in col] for col in cols]) - np.eye(4)  # dK/dR[k, j]
-            out[:, :, k, j] = lin.T  # (dK p)_c = sum_a dK[c, a] p_a; dK symmetric
+            e = np.zeros((3, 3))
+            e[k, j] = 1.0
+            cols, _ = _k4_columns(e)
+            out[:, :, k, j] = (np.array(cols) - np.eye(4)).T  # dK/dR[k, j]; symmetric
     return out
+
+
+_DK_PATTERN = _dk_pattern()
 
 
 def _k_times(cols, p):
@@ -214,7 +204,7 @@ def _markley_jvp(primals, tangents):
     # M_c = sum_a p_a S[c, a]: a broadcast against constant sign patterns, which XLA fuses
     # into the loop that consumes it (stacking the entries made it materialise them).
     p = (px, py, pz, pw)
-    pat = _dk_pattern().astype(R.dtype)
+    pat = _DK_PATTERN.astype(R.dtype)
     m = [sum(p[a][..., None, None] * pat[c, a] for a in range(4)) for c in range(4)]
     dk = _k_times(cols, dq0)
     dv = jnp.stack([dk[c] + jnp.sum(m[c] * dR, axis=(-2, -1)) for c in range(4)], axis=0)
