@@ -196,39 +196,58 @@ def _hypot(u, v):
     return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))
 
 
-def _quat_to_euler(q, seq):
-    """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold.
-
-    ``q`` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
-    """
+def _abcd(x, y, z, w, seq):
+    """The two complex factors ``A = a + ib`` and ``C = c + id`` of Bernardes & Viollet's
+    algorithm (before any scaling), linear in the quaternion's components: used for ``q`` and,
+    in the derivative, for its tangent."""
     axes, intrinsic = parse_seq(seq)
-    # Scale by a power of two (exact) so that the largest component is in [1, 2): the
-    # products A conj(C) and A C below then cannot underflow, whatever the norm of q.
-    # (Elementwise maxima, not jnp.max: XLA:CPU splits a reduction into loops of its own.)
-    q_in = q
-    aq = [jnp.abs(q[..., n]) for n in range(4)]
-    big = jnp.maximum(jnp.maximum(aq[0], aq[1]), jnp.maximum(aq[2], aq[3]))
-    # (A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
-    scale = _inv_pow2(jax.lax.stop_gradient(big))
     # The algorithm is stated for extrinsic sequences; an intrinsic sequence equals the reversed
     # extrinsic one with the angles in reverse order.
     i, j, k = axes[::-1] if intrinsic else axes
-    proper = i == k
-    if proper:
+    v = (x, y, z)
+    if i == k:  # proper Euler: k is the remaining axis
         k = 3 - i - j
-    sign = (i - j) * (j - k) * (k - i) // 2  # +1 for an even permutation of (x, y, z), else -1
-    if proper:
-        a, b, c, d = q[..., 3], q[..., i], q[..., j], sign * q[..., k]
-    else:
-        a, b = q[..., 3] - q[..., j], q[..., i] + sign * q[..., k]
-        c, d = q[..., j] + q[..., 3], sign * q[..., k] - q[..., i]
+        return w, v[i], v[j], _sign(seq) * v[k]
+    s = _sign(seq)
+    return w - v[j], v[i] + s * v[k], v[j] + w, s * v[k] - v[i]
+
+
+@functools.cache
+def _sign(seq):
+    """+1 if the algorithm's axes (i, j, k) are an even permutation of (x, y, z), else -1."""
+    axes, intrinsic = parse_seq(seq)
+    i, j, k = axes[::-1] if intrinsic else axes
+    if i == k:
+        k = 3 - i - j
+    return (i - j) * (j - k) * (k - i) // 2
+
+
+@functools.cache
+def _layout(seq):
+    """Per output angle (in ``seq``'s order): its name, factor and shift (see below)."""
+    axes, intrinsic = parse_seq(seq)
+    proper = axes[0] == axes[2]
+    factor = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(_sign(seq))}
+    shift = {"first": 0.0, "mid": 0.0 if proper else -np.pi / 2, "third": 0.0}
+    order = ("third", "mid", "first") if intrinsic else ("first", "mid", "third")
+    return order, tuple(factor[n] for n in order), tuple(shift[n] for n in order)
+
+
+def _factors(x, y, z, w, seq):
+    """From the quaternion's components (arrays of any one shape): the power-of-two scale, the
+    scaled factors ``(a, b, c, d)``, the same after the lock substitution, the lock masks, and
+    where the quaternion is zero or not finite."""
+    _, intrinsic = parse_seq(seq)
+    # Scale by a power of two (exact) so that the largest component is in [1, 2): the
+    # products A conj(C) and A C below then cannot underflow, whatever the norm of q.
+    # (Elementwise maxima, not jnp.max: XLA:CPU splits a reduction into loops of its own.)
+    aq = [jnp.abs(t) for t in (x, y, z, w)]
+    big = jnp.maximum(jnp.maximum(aq[0], aq[1]), jnp.maximum(aq[2], aq[3]))
+    # (A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
+    scale = _inv_pow2(jax.lax.stop_gradient(big))
     # The scale is applied to a, b, c, d (linear in q; a power of two, so exactly as if applied
     # to q): XLA:CPU then fuses it instead of writing a scaled copy of q.
-    a, b, c, d = (scale * t for t in (a, b, c, d))
-    hyp_cd, hyp_ab = _hypot(c, d), _hypot(a, b)
-    # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
-    # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
-    # (no wrap), and one rounding less than subtracting two atan2 results.
+    a, b, c, d = (scale * t for t in _abcd(x, y, z, w, seq))
     # Exactly at gimbal lock only one combination of the outer angles is defined. There the
     # angle that ends up *third* in the output is set to 0, as scipy does; this is an equality
     # test (up to underflow), not a threshold, so angles near lock keep the exact formula. The
@@ -238,35 +257,115 @@ def _quat_to_euler(q, seq):
     # is at least 0.35, so every product with it stays normal (XLA:CPU flushes subnormals to
     # zero, which would otherwise leave atan2(0, 0) for a C of 1e-310). The rotation moves by
     # less than 1e-307 rad (float64) / 5e-38 rad (float32) against the exact formula.
-    tiny = 4 * float(jnp.finfo(q.dtype).tiny)
+    tiny = 4 * float(jnp.finfo(x.dtype).tiny)
     lock_sum = (jnp.abs(c) < tiny) & (jnp.abs(d) < tiny)  # mid 0 (proper) / +pi/2 (Tait-Bryan)
     lock_diff = (jnp.abs(a) < tiny) & (jnp.abs(b) < tiny)  # mid pi (proper) / -pi/2 (T-B)
-    flip = 1 if intrinsic else -1  # extrinsic keeps `first`, intrinsic keeps `third`
+    locks = (lock_sum, lock_diff, 1 if intrinsic else -1)  # extrinsic keeps `first`
+    # NaN for the zero quaternion rather than a valid-looking rotation, and for a NaN or
+    # infinite component (the power-of-two scaling would otherwise zero the finite ones).
+    n2 = x * x + y * y + z * z + w * w  # a scalar sum, not jnp.sum: see _hypot
+    bad = (n2 == 0) | ~jnp.isfinite(n2)
+    return scale, (a, b, c, d), _substitute((a, b, c, d), locks), locks, bad
+
+
+def _substitute(abcd, locks):
+    """At exact lock, the zero factor replaced by (the conjugate of) the other (see above)."""
+    a, b, c, d = abcd
+    lock_sum, lock_diff, flip = locks
     c, d = jnp.where(lock_sum, a, c), jnp.where(lock_sum, flip * b, d)
     a, b = jnp.where(lock_diff, c, a), jnp.where(lock_diff, flip * d, b)
+    return a, b, c, d
+
+
+# The last angle in the output (`first` of an intrinsic sequence, `third` of an extrinsic one)
+# is the one set to 0 at exact lock.
+_LAST = np.array([False, False, True])
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _quat_to_euler(q, seq):
+    """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold.
+
+    ``q`` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
+    """
+    _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(
+        *(q[..., n] for n in range(4)), seq
+    )
+    # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
+    # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
+    # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
+    # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
     # The three atan2 are evaluated as one, on (..., 3) arrays in the output order: the result
     # is then written by one elementwise loop (stacking three separate results and moving the
     # axis last made XLA:CPU emit a transposing loop that LLVM did not vectorize in float64).
-    num = {"first": b * c - a * d, "mid": hyp_cd, "third": b * c + a * d}
-    den = {"first": a * c + b * d, "mid": hyp_ab, "third": a * c - b * d}
-    order = ("third", "mid", "first") if intrinsic else ("first", "mid", "third")
+    num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
+    den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
+    order, factor, shift = _layout(seq)
     ang = _atan2(
         jnp.stack([num[n] for n in order], axis=-1), jnp.stack([den[n] for n in order], axis=-1)
     )
-    factor = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(sign)}
-    shift = {"first": 0.0, "mid": 0.0 if proper else -np.pi / 2, "third": 0.0}
-    out = ang * np.array([factor[n] for n in order], dtype=ang.dtype) + np.array(
-        [shift[n] for n in order], dtype=ang.dtype
-    )
-    # The substitution makes the zeroed angle (the last in the output: `first` of an intrinsic
-    # sequence, `third` of an extrinsic one) an atan2 of (x - x, ...), which a fused
+    out = ang * np.array(factor, dtype=ang.dtype) + np.array(shift, dtype=ang.dtype)
+    # The substitution makes the zeroed angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: set it exactly.
-    out = jnp.where((lock_sum | lock_diff)[..., None] & np.array([False, False, True]), 0.0, out)
-    # NaN for the zero quaternion rather than a valid-looking rotation, and for a NaN or
-    # infinite component (the power-of-two scaling would otherwise zero the finite ones).
-    x, y, z, w = (q_in[..., n] for n in range(4))
-    n2 = x * x + y * y + z * z + w * w  # a scalar sum, not jnp.sum: see _hypot
-    return jnp.where(((n2 == 0) | ~jnp.isfinite(n2))[..., None], jnp.nan, out)
+    out = jnp.where((locks[0] | locks[1])[..., None] & _LAST, 0.0, out)
+    return jnp.where(bad[..., None], jnp.nan, out)
+
+
+@functools.cache
+def _abcd_patterns(seq):
+    """``(4, 4)``: row ``m`` holds the coefficients of ``(a, b, c, d)[m]`` on ``(x, y, z, w)``."""
+    return np.array(_abcd(*np.eye(4), seq), dtype=float)
+
+
+@_quat_to_euler.defjvp
+def _quat_to_euler_jvp(seq, primals, tangents):
+    # The exact derivative of the code above, written out so that reverse mode compiles to
+    # three loops rather than 17 (JAX's transpose of the forward code).
+    # The outer angles are arg(A) -+ arg(C), with derivatives Im(conj(A) dA) / |A|^2 and
+    # Im(conj(C) dC) / |C|^2 (after the lock substitution, where both factors have modulus at
+    # least 0.35); the middle one is 2 atan2(|C|, |A|), with derivative
+    # 2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) = 2 (|A|^2 C.dC - |C|^2 A.dA) / P,
+    # P = |A| |C| (|A|^2 + |C|^2), taken as 0 where P = 0 (at lock the middle angle sits at
+    # the edge of its range, a kink: the minimum-norm subgradient, as _hypot's).
+    # Each angle's derivative is sum(J * dq) with J a (..., 4) elementwise expression, so that
+    # the transpose (reverse mode) is one elementwise loop over the cotangent of q.
+    (q,), (dq,) = primals, tangents
+    comps = [q[..., n] for n in range(4)]
+    scale, (a, b, c, d), (sa, sb, sc, sd), _, _ = _factors(*comps, seq)
+    # The three divisions, per rotation, written by one loop (the barrier keeps XLA from
+    # turning the stack back into three arrays, each of which it would write in a loop).
+    p = _hypot(a, b) * _hypot(c, d) * (a * a + b * b + c * c + d * d)
+    zero = p == 0
+    recip = jax.lax.optimization_barrier(
+        jnp.stack(
+            [
+                scale / (sa * sa + sb * sb),
+                scale / (sc * sc + sd * sd),
+                jnp.where(zero, 0.0, scale / jnp.where(zero, 1.0, p)),
+            ],
+            axis=-1,
+        )
+    )
+    # The rest is computed again on (..., 4) arrays, each component of q broadcast once:
+    # XLA:CPU then fuses it into one loop (broadcasting each value at every use multiplied
+    # the code that fusion would emit, and XLA wrote the inputs out in loops of their own).
+    _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(
+        *(jnp.broadcast_to(t[..., None], q.shape) for t in comps), seq
+    )
+    p_a, p_c, t = (jnp.broadcast_to(recip[..., n : n + 1], q.shape) for n in range(3))
+    ea, eb, ec, ed = (jnp.asarray(e, dtype=q.dtype) for e in _abcd_patterns(seq))
+    sea, seb, sec, sed = _substitute((ea, eb, ec, ed), locks)
+    j_a = (sa * seb - sb * sea) * p_a
+    j_c = (sc * sed - sd * sec) * p_c
+    j_mid = (a * a + b * b) * t * (c * ec + d * ed) - (c * c + d * d) * t * (a * ea + b * eb)
+    order, factor, _ = _layout(seq)
+    jac = {"first": j_a - j_c, "mid": j_mid, "third": j_a + j_c}
+    jac = [f * jac[n] if f != 1 else jac[n] for n, f in zip(order, factor)]
+    # The angle set to 0 at lock: the substitution already makes its J cancel exactly, unless a
+    # fused multiply-add rounds the two halves differently (as in the forward code).
+    jac[2] = jnp.where(locks[0] | locks[1], 0.0, jac[2])
+    dout = jnp.stack([jnp.sum(jnp.where(bad, 0.0, j) * dq, axis=-1) for j in jac], axis=-1)
+    return _quat_to_euler(q, seq), dout
 
 
 @public

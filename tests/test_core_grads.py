@@ -324,3 +324,64 @@ def test_matrix_to_quaternion_float32_derivatives_stay_float32(method):
     assert np.all(np.isfinite(np.asarray(g)))
     g64 = jax.grad(lambda m: jnp.sum(f(m)))(R.astype(jnp.float64))
     assert_close(g, g64, atol=1e-5)
+
+
+def _euler_test_quaternions(seq):
+    """Random quaternions of norms from 1e-20 to 1e20, points 1e-9 from both locks, both exact
+    locks, and 180-degree rotations about each axis."""
+    rng = np.random.default_rng(17)
+    qs = list(rng.normal(size=(12, 4)) * np.exp(rng.uniform(-46, 46, size=(12, 1))))
+    for mid in (1e-9, np.pi - 1e-9) if is_proper(seq) else (np.pi / 2 - 1e-9, 1e-9 - np.pi / 2):
+        qs.append(np.asarray(rj.euler_to_quaternion(np.array([0.4, mid, -1.3]), seq)))
+    qs += [_exact_lock_quaternion(seq, i) for i in (0, 1)]
+    qs += list(np.hstack([np.eye(3), np.zeros((3, 1))]))
+    return jnp.asarray(np.array(qs))
+
+
+@pytest.mark.parametrize("seq", SEQS)
+def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
+    """quaternion_to_euler's custom jvp (and its transpose) equals JAX's own derivative of the
+    forward code, everywhere: generic points of any norm, near and exactly at lock (where the
+    forward code's selects define the gradient rule), 180 degrees; second derivatives too."""
+    from rotjax._euler import _quat_to_euler
+
+    q = _euler_test_quaternions(seq)
+    rng = np.random.default_rng(5)
+    dq = jnp.asarray(rng.normal(size=q.shape)) * jnp.linalg.norm(q, axis=-1, keepdims=True)
+    ct = jnp.asarray(rng.normal(size=q.shape[:-1] + (3,)))
+    f, f_ref = _quat_to_euler, _quat_to_euler.fun
+    ang, jv = jax.jvp(lambda x: f(x, seq), (q,), (dq,))
+    ang_ref, jv_ref = jax.jvp(lambda x: f_ref(x, seq), (q,), (dq,))
+    np.testing.assert_array_equal(ang, ang_ref)
+    scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
+    assert_close(jv / scale, jv_ref / scale, atol=1e-14)
+    g = jax.grad(lambda x: jnp.sum(ct * f(x, seq)))(q)
+    g_ref = jax.grad(lambda x: jnp.sum(ct * f_ref(x, seq)))(q)
+    assert np.all(np.isfinite(np.asarray(g)))
+    scale = np.abs(np.asarray(g_ref)).max(axis=-1, keepdims=True)
+    assert_close(g / scale, g_ref / scale, atol=1e-14)
+    for x in (q[0] / jnp.linalg.norm(q[0]), q[-4]):  # second derivatives: generic, exact lock
+        h = jax.hessian(lambda x: f(x, seq))(x)
+        h_ref = jax.hessian(lambda x: f_ref(x, seq))(x)
+        assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
+
+
+def test_euler_derivative_of_zero_and_nonfinite_quaternions():
+    """No rotation, no derivative: the angles are NaN and the derivative is 0 (not NaN, so one
+    bad row does not poison a batch's gradient), as JAX's derivative of the forward code."""
+    q = jnp.array([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1], [0.1, 0.2, 0.3, 0.9]])
+    g = jax.grad(lambda x: jnp.sum(jnp.nan_to_num(rj.quaternion_to_euler(x, "ZYX"))))(q)
+    np.testing.assert_array_equal(g[:3], 0.0)
+    assert np.abs(np.asarray(g[3])).min() > 0.01
+
+
+@pytest.mark.parametrize("fn", ["quaternion_to_euler", "matrix_to_euler"])
+def test_euler_float32_derivatives_stay_float32(fn):
+    q = np.array([0.3, -0.5, 0.2, 0.78])
+    x = q if fn == "quaternion_to_euler" else np.asarray(rj.quaternion_to_matrix(q))
+    f = lambda v: getattr(rj, fn)(v, "zxz")  # noqa: E731
+    x32 = jnp.asarray(x, dtype=jnp.float32)
+    _, jv = jax.jvp(f, (x32,), (jnp.ones_like(x32),))
+    g = jax.grad(lambda v: jnp.sum(f(v)))(x32)
+    assert jv.dtype == jnp.float32 and g.dtype == jnp.float32
+    assert_close(g, jax.grad(lambda v: jnp.sum(f(v)))(jnp.asarray(x)), atol=1e-5)
