@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._matrix import _from_matrix
+from ._matrix import _hemisphere_scale, _rotation_tangent, _selected_column, _shepperd
 from ._numerics import (
     as_float,
     check_shape,
@@ -288,9 +288,7 @@ def _quat_to_euler(q, seq):
 
     ``q`` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
     """
-    _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(
-        *(q[..., n] for n in range(4)), seq
-    )
+    _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*(q[..., n] for n in range(4)), seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
@@ -313,27 +311,36 @@ def _quat_to_euler(q, seq):
 
 @functools.cache
 def _abcd_patterns(seq):
-    """``(4, 4)``: row ``m`` holds the coefficients of ``(a, b, c, d)[m]`` on ``(x, y, z, w)``."""
+    """``(4, 4)``: row ``t`` holds the coefficients of ``(a, b, c, d)[t]`` on ``(x, y, z, w)``."""
     return np.array(_abcd(*np.eye(4), seq), dtype=float)
 
 
-@_quat_to_euler.defjvp
-def _quat_to_euler_jvp(seq, primals, tangents):
-    # The exact derivative of the code above, written out so that reverse mode compiles to
-    # three loops rather than 17 (JAX's transpose of the forward code).
-    # The outer angles are arg(A) -+ arg(C), with derivatives Im(conj(A) dA) / |A|^2 and
-    # Im(conj(C) dC) / |C|^2 (after the lock substitution, where both factors have modulus at
-    # least 0.35); the middle one is 2 atan2(|C|, |A|), with derivative
-    # 2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) = 2 (|A|^2 C.dC - |C|^2 A.dA) / P,
-    # P = |A| |C| (|A|^2 + |C|^2), taken as 0 where P = 0 (at lock the middle angle sits at
-    # the edge of its range, a kink: the minimum-norm subgradient, as _hypot's).
-    # Each angle's derivative is sum(J * dq) with J a (..., 4) elementwise expression, so that
-    # the transpose (reverse mode) is one elementwise loop over the cotangent of q.
-    (q,), (dq,) = primals, tangents
-    comps = [q[..., n] for n in range(4)]
+def _euler_jacobian(comps, seq, width, patterns):
+    """The three angles' derivatives (in output order) as ``(..., width)`` arrays ``J`` such
+    that ``d angle = sum(J * dx, axis=-1)`` for a tangent ``dx`` of ``width`` components.
+
+    ``comps`` are the quaternion's four components (per-rotation arrays, any norm).
+    ``patterns(wide)`` gives the derivatives of the unscaled ``(a, b, c, d)`` with respect to
+    ``dx``, four arrays that broadcast against ``wide``, the components broadcast to
+    ``(..., width)``.
+
+    The outer angles are arg(A) -+ arg(C), with derivatives Im(conj(A) dA) / |A|^2 and
+    Im(conj(C) dC) / |C|^2 (after the lock substitution, where both factors have modulus at
+    least 0.35); the middle one is 2 atan2(|C|, |A|), with derivative
+    2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) = 2 (|A|^2 C.dC - |C|^2 A.dA) / P,
+    P = |A| |C| (|A|^2 + |C|^2), taken as 0 where P = 0 (at lock the middle angle sits at
+    the edge of its range, a kink: the minimum-norm subgradient, as _hypot's).
+
+    Written for reverse mode, whose transpose of ``sum(J * dx)`` is one elementwise loop over
+    the cotangent of ``dx`` (17 XLA loops became 3 for quaternion_to_euler):
+
+    * the three divisions are per rotation, stacked and written by one loop (the barrier keeps
+      XLA from turning the stack back into three arrays, each written by a loop of its own);
+    * the rest is computed again on ``(..., width)`` arrays, each component of ``q`` broadcast
+      once: XLA:CPU then fuses it into one loop (broadcasting each value at every use
+      multiplied the code that fusion would emit, and XLA wrote the inputs out instead).
+    """
     scale, (a, b, c, d), (sa, sb, sc, sd), _, _ = _factors(*comps, seq)
-    # The three divisions, per rotation, written by one loop (the barrier keeps XLA from
-    # turning the stack back into three arrays, each of which it would write in a loop).
     p = _hypot(a, b) * _hypot(c, d) * (a * a + b * b + c * c + d * d)
     zero = p == 0
     recip = jax.lax.optimization_barrier(
@@ -346,26 +353,76 @@ def _quat_to_euler_jvp(seq, primals, tangents):
             axis=-1,
         )
     )
-    # The rest is computed again on (..., 4) arrays, each component of q broadcast once:
-    # XLA:CPU then fuses it into one loop (broadcasting each value at every use multiplied
-    # the code that fusion would emit, and XLA wrote the inputs out in loops of their own).
-    _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(
-        *(jnp.broadcast_to(t[..., None], q.shape) for t in comps), seq
-    )
-    p_a, p_c, t = (jnp.broadcast_to(recip[..., n : n + 1], q.shape) for n in range(3))
-    ea, eb, ec, ed = (jnp.asarray(e, dtype=q.dtype) for e in _abcd_patterns(seq))
+    shape = comps[0].shape + (width,)
+    comps = [jnp.broadcast_to(t[..., None], shape) for t in comps]
+    ea, eb, ec, ed = patterns(comps)
+    _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*comps, seq)
+    p_a, p_c, t = (jnp.broadcast_to(recip[..., i : i + 1], shape) for i in range(3))
     sea, seb, sec, sed = _substitute((ea, eb, ec, ed), locks)
     j_a = (sa * seb - sb * sea) * p_a
     j_c = (sc * sed - sd * sec) * p_c
     j_mid = (a * a + b * b) * t * (c * ec + d * ed) - (c * c + d * d) * t * (a * ea + b * eb)
     order, factor, _ = _layout(seq)
     jac = {"first": j_a - j_c, "mid": j_mid, "third": j_a + j_c}
-    jac = [f * jac[n] if f != 1 else jac[n] for n, f in zip(order, factor)]
+    jac = [f * jac[n] if f != 1 else jac[n] for n, f in zip(order, factor, strict=True)]
     # The angle set to 0 at lock: the substitution already makes its J cancel exactly, unless a
     # fused multiply-add rounds the two halves differently (as in the forward code).
     jac[2] = jnp.where(locks[0] | locks[1], 0.0, jac[2])
-    dout = jnp.stack([jnp.sum(jnp.where(bad, 0.0, j) * dq, axis=-1) for j in jac], axis=-1)
-    return _quat_to_euler(q, seq), dout
+    return [jnp.where(bad, 0.0, j) for j in jac]
+
+
+def _contract(jac, dx):
+    return jnp.stack([jnp.sum(j * dx, axis=-1) for j in jac], axis=-1)
+
+
+@_quat_to_euler.defjvp
+def _quat_to_euler_jvp(seq, primals, tangents):
+    # The exact derivative of the code above (see _euler_jacobian).
+    (q,), (dq,) = primals, tangents
+    e = [jnp.asarray(v, dtype=q.dtype) for v in _abcd_patterns(seq)]
+    jac = _euler_jacobian([q[..., i] for i in range(4)], seq, 4, lambda _: e)
+    return _quat_to_euler(q, seq), _contract(jac, dq)
+
+
+@functools.cache
+def _tangent_patterns(seq):
+    """``(4, 4, 3)``: ``T[t, i]`` is the derivative of ``(a, b, c, d)[t]`` with respect to
+    ``u`` for ``dq = q (x) (u, 0)`` at ``q = e_i``, so that at any ``q`` it is
+    ``sum_i q_i T[t, i]`` (linear in ``q``)."""
+    lam = np.zeros((4, 4, 3))  # lam[i, :, k] = e_i (x) (e_k, 0)
+    for i in range(4):
+        e = np.eye(4)[i]
+        for k in range(3):
+            u = np.eye(3)[k]
+            lam[i, :3, k] = e[3] * u + np.cross(e[:3], u)
+            lam[i, 3, k] = -e[:3] @ u
+    return np.einsum("tj,ijk->tik", _abcd_patterns(seq), lam)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _matrix_to_euler(R, seq):
+    return _quat_to_euler(_shepperd(R), seq)
+
+
+@_matrix_to_euler.defjvp
+def _matrix_to_euler_jvp(seq, primals, tangents):
+    # The chain rule through the Shepperd quaternion q, with its tangent-space rule
+    # dq = 1/2 q (x) (v, 0), v = vee(R^T dR) (see _shepperd_tangent): the angles' derivatives
+    # are taken directly with respect to u = v / 2 = _rotation_tangent / 4, three components
+    # rather than four, so that JAX's transpose does not go through dq; the Shepperd
+    # quaternion is kept as four per-rotation arrays (stacking it cost a transposing loop).
+    # (The benchmark's jit(grad) over forward went from 0.21 to ... in float32.)
+    (R,), (dR,) = primals, tangents
+    c, sq = _selected_column(R)
+    s = _hemisphere_scale(c, sq)
+    comps = [x * s for x in c]  # the Shepperd quaternion, not stacked
+    pat = _tangent_patterns(seq).astype(R.dtype)
+
+    def patterns(wide):
+        return [sum(wide[i] * pat[t, i] for i in range(4)) for t in range(4)]
+
+    u = jnp.stack(_rotation_tangent(R, dR), axis=-1) / 4
+    return _matrix_to_euler(R, seq), _contract(_euler_jacobian(comps, seq, 3, patterns), u)
 
 
 @public
@@ -468,7 +525,7 @@ def matrix_to_euler(R, seq: str, degrees: bool = False):
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
     parse_seq(seq)
-    ang = _quat_to_euler(_from_matrix(R, "shepperd"), seq)
+    ang = _matrix_to_euler(R, seq)
     if degrees:
         ang = jnp.rad2deg(ang)
     return ang.astype(dt)

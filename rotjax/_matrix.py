@@ -109,23 +109,14 @@ def _shepperd_tangent(R, dR):
     The code is arranged for reverse mode, where JAX transposes it (measured: jit(grad) went
     from 12 XLA loops to 2):
 
-    * dR enters only through elementwise products with three (..., 3, 3) arrays built from R
-      (v = 1/2 sum_k dR_k x R_k, row by row), whose transpose is one elementwise loop that
-      writes the whole cotangent of R;
+    * dR enters only through :func:`_rotation_tangent`;
     * v is divided by the signed column norm last, so in the transpose the cotangent of v ends
       in a division, which XLA does not recompute inside each of the nine consumers.
     """
     c, sq = _selected_column(R)
     n = jnp.sqrt(sq)
     n = 4.0 * jnp.where(c[3] < 0, -n, n)  # q = c / (n / 4); the 1/2 of v and of dq folded in
-    r0, r1, r2 = R[..., 0], R[..., 1], R[..., 2]  # columns of R
-    o = jnp.zeros_like(r0)
-    rows = (  # (dR_k x R_k)_a = sum_j A_a[k, j] dR[k, j]
-        jnp.stack([o, r2, -r1], axis=-1),
-        jnp.stack([-r2, o, r0], axis=-1),
-        jnp.stack([r1, -r0, o], axis=-1),
-    )
-    v = jnp.stack([jnp.sum(a * dR, axis=(-2, -1)) for a in rows], axis=0)
+    v = jnp.stack(_rotation_tangent(R, dR), axis=0)
     vx, vy, vz = v / jnp.stack([n, n, n], axis=0)
     x, y, z, w = c
     dq = [
@@ -135,6 +126,23 @@ def _shepperd_tangent(R, dR):
         -(x * vx + y * vy + z * vz),
     ]
     return c, sq, dq
+
+
+def _rotation_tangent(R, dR):
+    """``2 vee(R^T dR)`` (three per-rotation arrays) for a rotation matrix ``R``: twice the
+    body-frame angular velocity of ``dR`` (exact for ``dR = R hat(v)``; off the tangent space,
+    its projection onto it). Computed as ``sum_k dR_k x R_k`` over the rows ``k``; ``dR``
+    enters only through elementwise products with three (..., 3, 3) arrays built from ``R``,
+    whose transpose (reverse mode) is one elementwise loop that writes the cotangent of ``R``.
+    """
+    r0, r1, r2 = R[..., 0], R[..., 1], R[..., 2]  # columns of R
+    o = jnp.zeros_like(r0)
+    rows = (  # (dR_k x R_k)_a = sum_j A_a[k, j] dR[k, j]
+        jnp.stack([o, r2, -r1], axis=-1),
+        jnp.stack([-r2, o, r0], axis=-1),
+        jnp.stack([r1, -r0, o], axis=-1),
+    )
+    return [jnp.sum(a * dR, axis=(-2, -1)) for a in rows]
 
 
 @_shepperd.defjvp

@@ -338,6 +338,25 @@ def _euler_test_quaternions(seq):
     return jnp.asarray(np.array(qs))
 
 
+def _assert_rule_equals_autodiff(f, seq, x, dx, rng):
+    """The custom jvp of ``f(x, seq)`` (a jax.custom_jvp) and its transpose equal JAX's own
+    derivatives of the undecorated code ``f.fun``, row by row, relative to each row's size."""
+    g = lambda v: f(v, seq)  # noqa: E731
+    g_ref = lambda v: f.fun(v, seq)  # noqa: E731
+    out, jv = jax.jvp(g, (x,), (dx,))
+    out_ref, jv_ref = jax.jvp(g_ref, (x,), (dx,))
+    np.testing.assert_array_equal(out, out_ref)
+    scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
+    assert_close(jv / scale, jv_ref / scale, atol=1e-14)
+    ct = jnp.asarray(rng.normal(size=out.shape))
+    gr = jax.grad(lambda v: jnp.sum(ct * g(v)))(x)
+    gr_ref = jax.grad(lambda v: jnp.sum(ct * g_ref(v)))(x)
+    assert np.all(np.isfinite(np.asarray(gr)))
+    row_axes = tuple(range(out.ndim - 1, x.ndim))
+    scale = np.abs(np.asarray(gr_ref)).max(axis=row_axes, keepdims=True)
+    assert_close(gr / scale, gr_ref / scale, atol=1e-14)
+
+
 @pytest.mark.parametrize("seq", SEQS)
 def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     """quaternion_to_euler's custom jvp (and its transpose) equals JAX's own derivative of the
@@ -348,18 +367,8 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     q = _euler_test_quaternions(seq)
     rng = np.random.default_rng(5)
     dq = jnp.asarray(rng.normal(size=q.shape)) * jnp.linalg.norm(q, axis=-1, keepdims=True)
-    ct = jnp.asarray(rng.normal(size=q.shape[:-1] + (3,)))
+    _assert_rule_equals_autodiff(_quat_to_euler, seq, q, dq, rng)
     f, f_ref = _quat_to_euler, _quat_to_euler.fun
-    ang, jv = jax.jvp(lambda x: f(x, seq), (q,), (dq,))
-    ang_ref, jv_ref = jax.jvp(lambda x: f_ref(x, seq), (q,), (dq,))
-    np.testing.assert_array_equal(ang, ang_ref)
-    scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
-    assert_close(jv / scale, jv_ref / scale, atol=1e-14)
-    g = jax.grad(lambda x: jnp.sum(ct * f(x, seq)))(q)
-    g_ref = jax.grad(lambda x: jnp.sum(ct * f_ref(x, seq)))(q)
-    assert np.all(np.isfinite(np.asarray(g)))
-    scale = np.abs(np.asarray(g_ref)).max(axis=-1, keepdims=True)
-    assert_close(g / scale, g_ref / scale, atol=1e-14)
     for x in (q[0] / jnp.linalg.norm(q[0]), q[-4]):  # second derivatives: generic, exact lock
         h = jax.hessian(lambda x: f(x, seq))(x)
         h_ref = jax.hessian(lambda x: f_ref(x, seq))(x)
@@ -385,3 +394,20 @@ def test_euler_float32_derivatives_stay_float32(fn):
     g = jax.grad(lambda v: jnp.sum(f(v)))(x32)
     assert jv.dtype == jnp.float32 and g.dtype == jnp.float32
     assert_close(g, jax.grad(lambda v: jnp.sum(f(v)))(jnp.asarray(x)), atol=1e-5)
+
+
+@pytest.mark.parametrize("seq", SEQS)
+def test_matrix_to_euler_derivative_equals_chain_rule(seq):
+    """matrix_to_euler's custom jvp (taken with respect to the rotation tangent directly)
+    equals JAX's chain rule through the Shepperd quaternion and quaternion_to_euler's own
+    rule, in both modes, on rotation matrices (generic, near and at lock, 180 degrees) and
+    off SO(3) (noise sigma 1e-3, where both use the tangent-space projection)."""
+    from rotjax._euler import _matrix_to_euler
+
+    q = _euler_test_quaternions(seq)
+    R = np.asarray(rj.quaternion_to_matrix(q))
+    rng = np.random.default_rng(8)
+    R = jnp.asarray(np.concatenate([R, R[:6] + 1e-3 * rng.normal(size=R[:6].shape)]))
+    _assert_rule_equals_autodiff(
+        _matrix_to_euler, seq, R, jnp.asarray(rng.normal(size=R.shape)), rng
+    )
