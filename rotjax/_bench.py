@@ -533,9 +533,9 @@ def _accuracy(op, fn, impl, acc: _Accuracy, jnp_dtype):
 
     def run(x):
         if impl == "scipy":
-            return np.asarray(
-                fn(np.asarray(x, np.float64 if acc.dtype == "float64" else np.float32))
-            )
+            # A writable copy: scipy's compiled from_rotvec rejects a read-only buffer (such as
+            # a view of a JAX array), which had cost its float64 row its error columns.
+            return np.asarray(fn(np.array(x, np.float64 if acc.dtype == "float64" else np.float32)))
         return np.asarray(jnp.asarray(fn(jnp.asarray(x, dtype=jnp_dtype))).astype(jnp.float64))
 
     errs = {}
