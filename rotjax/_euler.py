@@ -521,6 +521,11 @@ def matrix_to_euler(R, seq: str, degrees: bool = False):
     Returns:
         ``(..., 3)`` angles in scipy's ranges; see :func:`quaternion_to_euler` for the ranges,
         the behaviour at gimbal lock and the gradient rule.
+
+    Note:
+        The derivative with respect to ``R`` is that of :func:`matrix_to_quaternion`'s
+        ``"shepperd"`` rule followed by :func:`quaternion_to_euler`'s: exact along SO(3); a
+        perturbation off SO(3) counts only through its component along the tangent space.
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
