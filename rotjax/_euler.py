@@ -196,38 +196,41 @@ def _hypot(u, v):
     return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))
 
 
-def _abcd(x, y, z, w, seq):
-    """The two complex factors ``A = a + ib`` and ``C = c + id`` of Bernardes & Viollet's
-    algorithm (before any scaling), linear in the quaternion's components: used for ``q`` and,
-    in the derivative, for its tangent."""
-    axes, intrinsic = parse_seq(seq)
-    # The algorithm is stated for extrinsic sequences; an intrinsic sequence equals the reversed
-    # extrinsic one with the angles in reverse order.
-    i, j, k = axes[::-1] if intrinsic else axes
-    v = (x, y, z)
-    if i == k:  # proper Euler: k is the remaining axis
-        k = 3 - i - j
-        return w, v[i], v[j], _sign(seq) * v[k]
-    s = _sign(seq)
-    return w - v[j], v[i] + s * v[k], v[j] + w, s * v[k] - v[i]
-
-
 @functools.cache
-def _sign(seq):
-    """+1 if the algorithm's axes (i, j, k) are an even permutation of (x, y, z), else -1."""
+def _algorithm_axes(seq):
+    """``(i, j, k, sign)`` of Bernardes & Viollet's algorithm for ``seq``: the axes of the
+    equivalent extrinsic sequence (an intrinsic sequence equals the reversed extrinsic one with
+    the angles in reverse order), ``k`` the remaining axis for a proper Euler sequence, and
+    ``sign`` +1 if ``(i, j, k)`` is an even permutation of ``(x, y, z)``, else -1."""
     axes, intrinsic = parse_seq(seq)
     i, j, k = axes[::-1] if intrinsic else axes
     if i == k:
         k = 3 - i - j
-    return (i - j) * (j - k) * (k - i) // 2
+    return i, j, k, (i - j) * (j - k) * (k - i) // 2
+
+
+def _abcd(x, y, z, w, seq):
+    """The two complex factors ``A = a + ib`` and ``C = c + id`` of Bernardes & Viollet's
+    algorithm (before any scaling), linear in the quaternion's components: used for ``q`` and,
+    in the derivative, for its tangent."""
+    i, j, k, s = _algorithm_axes(seq)
+    v = (x, y, z)
+    if _is_proper(seq):
+        return w, v[i], v[j], s * v[k]
+    return w - v[j], v[i] + s * v[k], v[j] + w, s * v[k] - v[i]
+
+
+def _is_proper(seq):
+    axes, _ = parse_seq(seq)
+    return axes[0] == axes[2]
 
 
 @functools.cache
 def _layout(seq):
     """Per output angle (in ``seq``'s order): its name, factor and shift (see below)."""
-    axes, intrinsic = parse_seq(seq)
-    proper = axes[0] == axes[2]
-    factor = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(_sign(seq))}
+    _, intrinsic = parse_seq(seq)
+    proper = _is_proper(seq)
+    factor = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(_algorithm_axes(seq)[3])}
     shift = {"first": 0.0, "mid": 0.0 if proper else -np.pi / 2, "third": 0.0}
     order = ("third", "mid", "first") if intrinsic else ("first", "mid", "third")
     return order, tuple(factor[n] for n in order), tuple(shift[n] for n in order)
@@ -389,13 +392,11 @@ def _tangent_patterns(seq):
     """``(4, 4, 3)``: ``T[t, i]`` is the derivative of ``(a, b, c, d)[t]`` with respect to
     ``u`` for ``dq = q (x) (u, 0)`` at ``q = e_i``, so that at any ``q`` it is
     ``sum_i q_i T[t, i]`` (linear in ``q``)."""
-    lam = np.zeros((4, 4, 3))  # lam[i, :, k] = e_i (x) (e_k, 0)
-    for i in range(4):
-        e = np.eye(4)[i]
-        for k in range(3):
-            u = np.eye(3)[k]
-            lam[i, :3, k] = e[3] * u + np.cross(e[:3], u)
-            lam[i, 3, k] = -e[:3] @ u
+    # lam[i, :, k] = e_i (x) (e_k, 0), from the Hamilton product itself (once per sequence)
+    e4 = np.eye(4)
+    u = np.concatenate([np.eye(3), np.zeros((3, 1))], axis=1)
+    with jax.ensure_compile_time_eval():  # a constant, also when first needed inside a trace
+        lam = np.asarray(_multiply(e4[:, None, :], u[None, :, :]), dtype=float).transpose(0, 2, 1)
     return np.einsum("tj,ijk->tik", _abcd_patterns(seq), lam)
 
 
