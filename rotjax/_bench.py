@@ -16,7 +16,16 @@ are importable (scipy ``Rotation``, ``jax.scipy.spatial.transform.Rotation``, ja
 Errors: quaternions componentwise up to sign, against the mpmath quaternion of the rotation
 nearest to the input matrix (the top eigenvector of the 4x4 ``K``, Bar-Itzhack 2000); Euler
 angles as a backward error, the angle between the rotation of the returned angles (evaluated in
-mpmath) and the input rotation; matrices and rotation vectors componentwise.
+mpmath) and the input rotation; matrices and rotation vectors componentwise. The JAX
+contenders' errors come from the executable whose throughput is reported (the sets padded to
+its batch; XLA:CPU's code, and so its rounding, can depend on the batch size), except jaxlie's,
+timed in its own layout and jitted apart for the sets, and the Euler sequences other than the
+timed one.
+
+``--quick`` (CI, and a first look): a batch of 2^16, three rounds, 8 rotations per set, two
+sequences, four operations; bfloat16/float16 for matrix_to_quaternion only; gradients of
+rotjax's default methods only; single-call latency of rotjax and scipy only (a JAX peer's first
+eager call compiles op by op, which costs seconds).
 
 Ratios are medians of per-round ratios, which cancel most of the drift of a noisy machine.
 glibc returns large freed buffers to the system and maps fresh ones, so every call would pay
@@ -472,7 +481,7 @@ def _as_dtype(x, dtype):
     import jax.numpy as jnp
     import numpy as np
 
-    return np.asarray(jnp.asarray(x, dtype=dtype).astype(jnp.float64))
+    return np.asarray(jnp.asarray(x, dtype=dtype)).astype(np.float64)  # cast in NumPy: no compile
 
 
 def _quat_err(got, ref):
@@ -526,25 +535,52 @@ def _euler_backward(acc, angles, q_mp, seqs):
     return out
 
 
-def _accuracy(op, fn, impl, acc: _Accuracy, jnp_dtype):
-    """``{set: errors in eps}`` of one contender."""
+_BASIC_SETS = ("uniform", "near_identity", "near_180")
+
+
+def _accuracy(op, fn, impl, acc: _Accuracy, jnp_dtype, compiled=None, batch=0):
+    """``{set: errors in eps}`` of one contender.
+
+    ``compiled``: the contender's executable from the throughput columns, for a batch of
+    ``batch`` rotations in rotjax's layout; the sets are padded to that batch and run through
+    it, which saves a compilation. Without it, traced contenders are jitted for the sets.
+    """
+    import jax
     import jax.numpy as jnp
     import numpy as np
+
+    # Traced contenders run jitted, as in the throughput columns, and once on all sets together:
+    # one compilation (or none) per contender and dtype instead of one per set (or, eagerly,
+    # per op).
+    f_jit = None if impl == "scipy" else jax.jit(fn)
 
     def run(x):
         if impl == "scipy":
             # A writable copy: scipy's compiled from_rotvec rejects a read-only buffer (such as
             # a view of a JAX array), which had cost its float64 row its error columns.
             return np.asarray(fn(np.array(x, np.float64 if acc.dtype == "float64" else np.float32)))
-        return np.asarray(jnp.asarray(fn(jnp.asarray(x, dtype=jnp_dtype))).astype(jnp.float64))
+        # Padding, slicing and casts in NumPy: as JAX ops, each new shape would compile.
+        x, m = np.asarray(x), len(x)
+        if compiled is not None and m <= batch:
+            pad = np.broadcast_to(x[:1], (batch - m, *x.shape[1:]))
+            out = compiled(jnp.asarray(np.concatenate([x, pad]), dtype=jnp_dtype))
+        else:
+            out = f_jit(jnp.asarray(x, dtype=jnp_dtype))
+        return np.asarray(out)[:m].astype(np.float64)
+
+    def run_sets(sets):
+        """``{name: output}`` of one call on the concatenation of ``{name: input}``."""
+        out = run(np.concatenate(list(sets.values())))
+        ends = np.cumsum([len(v) for v in sets.values()])
+        return dict(zip(sets, np.split(out, ends[:-1]), strict=True))
 
     errs = {}
     if op == "matrix_to_quaternion":
-        for k, R in acc.msets.items():
-            errs[k] = _quat_err(run(R), acc.mq_ref[k])
+        for k, got in run_sets(acc.msets).items():
+            errs[k] = _quat_err(got, acc.mq_ref[k])
     elif op in ("quaternion_to_euler", "matrix_to_euler"):
         mp_ = _mp()
-        names = ("uniform", "near_identity", "near_180")
+        names = _BASIC_SETS
         gnames = tuple(acc.gsets)
         rows_of = {g: {} for g in gnames}  # set -> seq -> row indices
         for g in gnames:
@@ -578,16 +614,14 @@ def _accuracy(op, fn, impl, acc: _Accuracy, jnp_dtype):
                 ]
         errs = {k: np.array(v) for k, v in per.items()}
     elif op == "quaternion_to_matrix":
-        for k in ("uniform", "near_identity", "near_180"):
-            got = run(acc.qsets[k])
+        for k, got in run_sets({k: acc.qsets[k] for k in _BASIC_SETS}).items():
             ref = np.array(
                 [[[float(c) for c in row] for row in _mp_quat_to_matrix(q)] for q in acc.qsets[k]]
             )
             errs[k] = np.abs(got - ref).reshape(len(ref), -1).max(-1)
     elif op == "quaternion_to_rotvec":
         mp_ = _mp()
-        for k in ("uniform", "near_identity", "near_180"):
-            got = run(acc.qsets[k])
+        for k, got in run_sets({k: acc.qsets[k] for k in _BASIC_SETS}).items():
             ref = []
             for q in acc.q_mp[k]:
                 x, y, z, w = q if q[3] >= 0 else [-c for c in q]  # angle in [0, pi]
@@ -597,15 +631,18 @@ def _accuracy(op, fn, impl, acc: _Accuracy, jnp_dtype):
             errs[k] = np.abs(got - np.array(ref)).max(-1)
     elif op == "rotvec_to_quaternion":
         mp_ = _mp()
-        for k in ("uniform", "near_identity", "near_180"):
-            v = _as_dtype(np.array([_rotvec_of(q) for q in acc.qsets[k]]), acc.dtype)
+        vs = {
+            k: _as_dtype(np.array([_rotvec_of(q) for q in acc.qsets[k]]), acc.dtype)
+            for k in _BASIC_SETS
+        }
+        for k, got in run_sets(vs).items():
             ref = []
-            for r in v:
+            for r in vs[k]:
                 r = [mp_.mpf(float(c)) for c in r]
                 t = mp_.sqrt(sum(c * c for c in r))
                 k_ = mp_.sin(t / 2) / t if t != 0 else mp_.mpf(0.5)
                 ref.append([float(k_ * c) for c in r] + [float(mp_.cos(t / 2))])
-            errs[k] = _quat_err(run(v), np.array(ref))
+            errs[k] = _quat_err(got, np.array(ref))
     elif op == "integrate_angular_velocity":
         # One step with |omega dt| = 0.01 rad against the exact exponential step, in mpmath.
         mp_ = _mp()
@@ -642,7 +679,7 @@ def _euler_call(fn, impl, x, seq, jnp_dtype):
     quat = x.shape[-1] == 4
     if impl == "rotjax":
         f = rj.quaternion_to_euler if quat else rj.matrix_to_euler
-        return np.asarray(f(jnp.asarray(x, dtype=jnp_dtype), seq).astype(jnp.float64))
+        return np.asarray(f(jnp.asarray(x, dtype=jnp_dtype), seq)).astype(np.float64)
     if impl == "jax.scipy":
         from jax.scipy.spatial.transform import Rotation as JR
 
@@ -660,7 +697,8 @@ def _euler_call(fn, impl, x, seq, jnp_dtype):
             warnings.simplefilter("ignore")  # scipy warns at gimbal lock
             r = Rotation.from_quat(x) if quat else Rotation.from_matrix(x)
             return r.as_euler(seq)
-    return np.asarray(fn(jnp.asarray(x, dtype=jnp_dtype)), np.float64)  # jaxlie: its one sequence
+    # jaxlie: its one sequence, jitted (as timed; one compilation rather than one per op)
+    return np.asarray(jax.jit(fn)(jnp.asarray(x, dtype=jnp_dtype)), np.float64)
 
 
 # --- the benchmark ---------------------------------------------------------------------------
@@ -720,7 +758,7 @@ def run(quick: bool, out_dir: Path, ops=None) -> list[dict]:
     rounds = 3 if quick else 21  # medians of per-round ratios: enough rounds to outvote bursts
     n_acc = 8 if quick else 96
     per_seq = 4 if quick else 8
-    # Accuracy of Euler extraction: every sequence in a full run, a spread of six in --quick.
+    # Accuracy of Euler extraction: every sequence in a full run, one of each kind in --quick.
     seqs = ["xyz", "ZXZ"] if quick else SEQS
     eager_reps = 10 if quick else 100
     rng = np.random.default_rng(2024)
@@ -755,7 +793,8 @@ def run(quick: bool, out_dir: Path, ops=None) -> list[dict]:
         _log("[bench] rotjax._kinematics not available: skipping integrate_angular_velocity")
         ops = [o for o in ops if o != "integrate_angular_velocity"]
     dtypes = ["float32", "float64"]
-    low = {"matrix_to_quaternion", "quaternion_to_euler"}  # also measured in bf16 and f16
+    # Also measured in bfloat16 and float16 (--quick: one op, which keeps that path exercised).
+    low = {"matrix_to_quaternion"} if quick else {"matrix_to_quaternion", "quaternion_to_euler"}
     rows = []
     acc_cache = {}
     t_start = time.perf_counter()
@@ -817,7 +856,7 @@ def run(quick: bool, out_dir: Path, ops=None) -> list[dict]:
                 _log(f"[bench {time.perf_counter() - t_start:6.1f}s]   mpmath references ({dt})")
                 acc_cache[dt] = _Accuracy(np.random.default_rng(99), n_acc, per_seq, dt, seqs)
             acc = acc_cache[dt]
-            for impl, method, fn, _traceable in cont:
+            for impl, method, fn, traceable in cont:
                 key = (impl, method)
                 if key not in entries:
                     continue
@@ -832,7 +871,9 @@ def run(quick: bool, out_dir: Path, ops=None) -> list[dict]:
                     tg = times[("grad",) + key]
                     row["grad_mrot_s"] = n / _median_time(tg) / 1e6
                     row["grad_over_fwd"] = _median_ratio(t, tg)
-                if dt in ("float32", "float64"):
+                # --quick times single calls of rotjax and scipy only: the JAX peers' first
+                # eager call compiles op by op (seconds), and the targets compare with scipy.
+                if dt in ("float32", "float64") and not (quick and impl in ("jax.scipy", "jaxlie")):
                     # One rotation, unbatched (jaxlie's adapters vmap, so they get a batch of 1).
                     # rotjax's public functions jit-wrap themselves; jax.scipy runs op by op.
                     x1_np = np.array(x1, np.float64 if dt == "float64" else np.float32)
@@ -842,7 +883,9 @@ def run(quick: bool, out_dir: Path, ops=None) -> list[dict]:
                         fn, x1_in, scipy_eager, x1_np, eager_reps
                     )
                 try:
-                    errs = _accuracy(op, fn, impl, acc, jdt)
+                    # jaxlie's executable takes its own layout: it is jitted apart.
+                    reuse = impl != "jaxlie" and key in entries and traceable
+                    errs = _accuracy(op, fn, impl, acc, jdt, entries[key][0] if reuse else None, n)
                 except Exception as e:  # noqa: BLE001 - report, do not hide
                     _log(f"[bench]   {impl} {method}: accuracy failed ({type(e).__name__}: {e})")
                     errs = {}
