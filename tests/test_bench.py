@@ -204,3 +204,46 @@ def test_quick_benchmark_writes_json(tmp_path):
             assert r["err_max_eps"] is not None and r["err_by_set"]
     assert (tmp_path / "bench.txt").read_text().startswith("operation")
     assert (tmp_path / "bench.png").exists()
+
+
+ALL_OPS = [
+    ("matrix_to_quaternion", "shepperd"),
+    ("quaternion_to_euler", ""),
+    ("matrix_to_euler", ""),
+    ("quaternion_to_matrix", ""),
+    ("quaternion_to_rotvec", ""),
+    ("rotvec_to_quaternion", ""),
+    ("integrate_angular_velocity", "exponential"),
+]
+
+
+@pytest.fixture(scope="module")
+def small_accuracy():
+    return B._Accuracy(np.random.default_rng(4), 4, 1, "float64", ["xyz", "ZXZ"])
+
+
+@pytest.mark.parametrize(("op", "method"), ALL_OPS)
+def test_accuracy_pass_every_operation(small_accuracy, op, method):
+    """The benchmark's accuracy pass on each operation, both ways it runs a JAX contender:
+    through the throughput executable (sets padded to its batch) and jitted for the sets. Both
+    must report every set, finite, within the documented float64 bounds (at most 5 eps)."""
+    fn = next(f for impl, m, f, _ in B._contenders(op, {}) if impl == "rotjax" and m == method)
+    batch = 256  # larger than the sets together (about 70 rows)
+    shape = B._input_shape(op)
+    q = B._quats(np.random.default_rng(0), batch)
+    x = {
+        (4,): q,
+        (3, 3): B._np_matrix(q),
+        (3,): 0.7 * q[:, :3],
+        (7,): np.concatenate([q, q[:, :3]], axis=1),
+    }[shape]
+    compiled = jax.jit(fn).lower(jnp.asarray(x)).compile()
+    padded = B._accuracy(op, fn, "rotjax", small_accuracy, jnp.float64, compiled, batch)
+    apart = B._accuracy(op, fn, "rotjax", small_accuracy, jnp.float64)
+    assert padded.keys() == apart.keys() and padded
+    for k in padded:
+        assert len(padded[k]) == len(apart[k]) > 0
+        for errs in (padded[k], apart[k]):
+            assert np.all(np.isfinite(errs)), (op, k)
+            if not k.startswith("noisy"):  # noisy matrices: Shepperd's O(sigma), by design
+                assert errs.max() <= 5.0, (op, k, errs.max())
