@@ -228,7 +228,7 @@ def test_accuracy_pass_every_operation(small_accuracy, op, method):
     through the throughput executable (sets padded to its batch) and jitted for the sets. Both
     must report every set, finite, within the documented float64 bounds (at most 5 eps)."""
     fn = next(f for impl, m, f, _ in B._contenders(op, {}) if impl == "rotjax" and m == method)
-    batch = 256  # larger than the sets together (about 70 rows)
+    batch = 256  # larger than the sets together (at most 34 rows here)
     shape = B._input_shape(op)
     q = B._quats(np.random.default_rng(0), batch)
     x = {
