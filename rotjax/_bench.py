@@ -194,10 +194,11 @@ def _gimbal_set(rng, per_seq, seqs, lo, hi):
     """
     import numpy as np
 
+    from ._euler import is_proper
+
     seq_of, qs = [], []
     for seq in seqs:
-        proper = seq[0] == seq[2]
-        locks = (0.0, np.pi) if proper else (np.pi / 2, -np.pi / 2)
+        locks = (0.0, np.pi) if is_proper(seq) else (np.pi / 2, -np.pi / 2)
         for k in range(per_seq):
             lock = locks[(k // 2) % 2]
             dist = (

@@ -215,12 +215,15 @@ def _abcd(x, y, z, w, seq):
     in the derivative, for its tangent."""
     i, j, k, s = _algorithm_axes(seq)
     v = (x, y, z)
-    if _is_proper(seq):
+    if is_proper(seq):
         return w, v[i], v[j], s * v[k]
     return w - v[j], v[i] + s * v[k], v[j] + w, s * v[k] - v[i]
 
 
-def _is_proper(seq):
+def is_proper(seq) -> bool:
+    """Whether ``seq`` is a proper Euler sequence (first and third axes equal, e.g. ``"ZXZ"``)
+    rather than a Tait-Bryan one (three distinct axes); raises ``ValueError`` like
+    :func:`parse_seq` for an invalid ``seq``."""
     axes, _ = parse_seq(seq)
     return axes[0] == axes[2]
 
@@ -229,7 +232,7 @@ def _is_proper(seq):
 def _layout(seq):
     """Per output angle (in ``seq``'s order): its name, factor and shift (see below)."""
     _, intrinsic = parse_seq(seq)
-    proper = _is_proper(seq)
+    proper = is_proper(seq)
     factor = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(_algorithm_axes(seq)[3])}
     shift = {"first": 0.0, "mid": 0.0 if proper else -np.pi / 2, "third": 0.0}
     order = ("third", "mid", "first") if intrinsic else ("first", "mid", "third")

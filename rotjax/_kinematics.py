@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._euler import parse_seq
+from ._euler import is_proper, parse_seq
 from ._numerics import as_float, check_shape, from_scalar_last, hat, public, to_scalar_last, vee
 from ._quaternion import _conjugate, _multiply, _normalize
 from ._rotvec import _rotvec_to_quat
@@ -469,7 +469,7 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
     """
     (a,), dt = as_float(angles)
     check_shape(a, (3,), "angles")
-    axes, _ = parse_seq(seq)
+    parse_seq(seq)  # a bad seq raises here, before any array work
     ndim = a.ndim
     if not isinstance(axis, int) or not -ndim <= axis < ndim or axis % ndim == ndim - 1:
         raise ValueError(
@@ -483,7 +483,7 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
     # Second solution set: R_i(a0 + pi) R_j(b) R_k(a2 + pi) = R_i(a0) R_j(a1) R_k(a2) needs
     # b = pi - a1 when i != k and b = -a1 when i == k (rotating by pi about e_i flips e_j).
     flip = np.array([1.0, -1.0, 1.0])
-    offset = np.array([np.pi, np.pi if axes[0] != axes[2] else 0.0, np.pi])
+    offset = np.array([np.pi, 0.0 if is_proper(seq) else np.pi, np.pi])
     flip, offset = jnp.asarray(flip, x.dtype), jnp.asarray(offset, x.dtype)
 
     def nearest(c, prev):
