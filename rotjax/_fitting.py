@@ -20,12 +20,14 @@ import jax.numpy as jnp
 
 from ._matrix import _from_matrix, _k4_columns, _positive_w
 from ._numerics import (
+    FULL,
     TIE_ULPS,
     as_float,
     check_shape,
     cross,
     eps,
     from_scalar_last,
+    matmul,
     public,
     safe_atan2,
     safe_div,
@@ -53,7 +55,7 @@ def _svd_signed(M):
     Then ``U @ V^T`` is in SO(3) and ``s[2]`` is negative when ``det M < 0``.
     """
     U, s, Vt = jnp.linalg.svd(M)
-    d = jnp.sign(jnp.linalg.det(U @ Vt))  # exactly +-1 up to rounding: U, V are orthogonal
+    d = jnp.sign(jnp.linalg.det(matmul(U, Vt)))  # exactly +-1 up to rounding: U, V are orthogonal
     flip = jnp.stack([jnp.ones_like(d), jnp.ones_like(d), d], axis=-1)
     return U * flip[..., None, :], s * flip, Vt
 
@@ -62,7 +64,7 @@ def _svd_signed(M):
 def _project(M):
     """Rotation nearest to ``M`` in the Frobenius norm: ``U diag(1, 1, det(U V^T)) V^T``."""
     U, _, Vt = _svd_signed(M)
-    return U @ Vt
+    return matmul(U, Vt)
 
 
 @_project.defjvp
@@ -75,11 +77,11 @@ def _project_jvp(primals, tangents):
     # det M < 0 with s_2 = s_3 (then s'_2 + s'_3 = s_2 - s_3). There W_ij is set to 0.
     (M,), (dM,) = primals, tangents
     U, s, Vt = _svd_signed(M)
-    P = _mT(U) @ dM @ _mT(Vt)
+    P = matmul(matmul(_mT(U), dM), _mT(Vt))
     den = s[..., :, None] + s[..., None, :]
     tol = TIE_ULPS * eps(M.dtype) * jnp.abs(s[..., :1, None])
     W = safe_div(P - _mT(P), den, tol)
-    return U @ Vt, U @ W @ Vt
+    return matmul(U, Vt), matmul(matmul(U, W), Vt)
 
 
 # --- top eigenvector of a symmetric 4x4 matrix ------------------------------------------
@@ -134,7 +136,7 @@ def geodesic_distance(R_a, R_b):
         entries, but not a distance.
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
-    M = _mT(R_a) @ R_b
+    M = matmul(_mT(R_a), R_b)
     c = 0.5 * (jnp.trace(M, axis1=-2, axis2=-1) - 1)
     return safe_atan2(safe_norm(vee(M)), c).astype(dt)
 
@@ -290,7 +292,7 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
         if weights.ndim < 1 or weights.shape[-1] != a.shape[-2]:
             raise ValueError(f"weights: expected shape (..., {a.shape[-2]}), got {weights.shape}")
         a = a * weights[..., None]
-    B = jnp.einsum("...ni,...nj->...ij", a, b)
+    B = jnp.einsum("...ni,...nj->...ij", a, b, precision=FULL)
     if method == "svd":
         q = _from_matrix(_project(B), "shepperd")
     else:
@@ -335,7 +337,7 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
     if weights is not None and (weights.ndim < 1 or weights.shape[-1] != q.shape[-2]):
         raise ValueError(f"weights: expected shape (..., {q.shape[-2]}), got {weights.shape}")
     qw = q if weights is None else q * weights[..., None]
-    M = jnp.einsum("...ni,...nj->...ij", qw, q)
+    M = jnp.einsum("...ni,...nj->...ij", qw, q, precision=FULL)
     return from_scalar_last(_positive_w(top_eigenvector(M)), scalar_first).astype(dt)
 
 

@@ -29,7 +29,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._euler import is_proper, parse_seq
-from ._numerics import as_float, check_shape, from_scalar_last, hat, public, to_scalar_last, vee
+from ._numerics import (
+    as_float,
+    check_shape,
+    from_scalar_last,
+    hat,
+    matmul,
+    public,
+    to_scalar_last,
+    vee,
+)
 from ._quaternion import _conjugate, _multiply, _normalize
 from ._rotvec import _rotvec_to_quat
 
@@ -204,7 +213,7 @@ def euler_rates_to_angular_velocity(angles, rates, seq: str, frame: str = "body"
     check_shape(a, (3,), "angles")
     check_shape(r, (3,), "rates")
     E = _rate_matrix(a, seq, frame)
-    return jnp.einsum("...ij,...j->...i", E, r).astype(dt)
+    return jnp.sum(E * r[..., None, :], axis=-1).astype(dt)
 
 
 @public
@@ -350,7 +359,7 @@ def matrix_derivative_to_angular_velocity(R, R_dot, frame: str = "body"):
     check_shape(Rd, (3, 3), "R_dot")
     _check_frame(frame)
     Rt = jnp.swapaxes(R, -1, -2)
-    return vee(Rt @ Rd if frame == "body" else Rd @ Rt).astype(dt)
+    return vee(matmul(Rt, Rd) if frame == "body" else matmul(Rd, Rt)).astype(dt)
 
 
 @public
@@ -371,7 +380,7 @@ def angular_velocity_to_matrix_derivative(R, omega, frame: str = "body"):
     check_shape(w, (3,), "omega")
     _check_frame(frame)
     W = hat(w)
-    return (R @ W if frame == "body" else W @ R).astype(dt)
+    return (matmul(R, W) if frame == "body" else matmul(W, R)).astype(dt)
 
 
 # --- attitude propagation ----------------------------------------------------------------------

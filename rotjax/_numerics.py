@@ -5,7 +5,10 @@ Everything here is private. The helpers follow two rules that the public functio
 * thresholds are functions of the dtype (``_eps``), never fixed constants;
 * any operation that is singular somewhere is guarded by the *double where* pattern: the
   dangerous operand is replaced by a harmless value before the operation, so that the branch not
-  taken cannot send NaN (or inf) into the gradient.
+  taken cannot send NaN (or inf) into the gradient;
+* every matrix product (``dot_general``) asks for full precision (:data:`FULL`): on GPUs a
+  float32 ``dot`` at JAX's default precision may run in TF32 (10-bit mantissa), and on TPUs in
+  bfloat16 passes.
 """
 
 from __future__ import annotations
@@ -18,6 +21,15 @@ import numpy as np
 
 # Dtypes that are computed in float32 and cast back (they have too few bits for the algorithms).
 _LOW_PRECISION = (jnp.dtype(jnp.bfloat16), jnp.dtype(jnp.float16))
+
+
+# Precision of every dot_general in rotjax. XLA:CPU computes float32 in full either way.
+FULL = jax.lax.Precision.HIGHEST
+
+
+def matmul(a, b):
+    """``a @ b`` at full precision on every backend (see :data:`FULL`)."""
+    return jnp.matmul(a, b, precision=FULL)
 
 
 def eps(dtype) -> float:

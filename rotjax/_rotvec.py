@@ -11,6 +11,7 @@ from ._numerics import (
     eps,
     from_scalar_last,
     hat,
+    matmul,
     public,
     safe_norm,
     to_scalar_last,
@@ -131,7 +132,7 @@ def rotvec_to_matrix(rotvec, degrees: bool = False):
     b = (2 * k * k)[..., None, None]
     K = hat(v)
     eye = jnp.eye(3, dtype=v.dtype)
-    return (eye + a * K + b * (K @ K)).astype(dt)
+    return (eye + a * K + b * matmul(K, K)).astype(dt)
 
 
 @public
