@@ -994,6 +994,7 @@ def main(argv: list[str] | None = None) -> int:
     meta = {
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "machine": _machine(),
+        "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}",
         "jax": jax.__version__,
         "quick": args.quick,
         "batch": 1 << (16 if args.quick else 20),

@@ -192,6 +192,7 @@ def test_quick_benchmark_writes_json(tmp_path):
     assert rc == 0
     data = json.loads((tmp_path / "bench.json").read_text())
     assert data["meta"]["quick"] is True
+    assert data["meta"]["device"].startswith(jax.default_backend() + ": ")
     assert data["meta"]["malloc_env"]["MALLOC_MMAP_THRESHOLD_"] is not None
     rows = data["rows"]
     assert rows and all(set(r) == set(B.COLUMNS) for r in rows)
