@@ -35,6 +35,7 @@ from ._numerics import (
     from_scalar_last,
     hat,
     matmul,
+    matvec,
     public,
     to_scalar_last,
     vee,
@@ -213,7 +214,7 @@ def euler_rates_to_angular_velocity(angles, rates, seq: str, frame: str = "body"
     check_shape(a, (3,), "angles")
     check_shape(r, (3,), "rates")
     E = _rate_matrix(a, seq, frame)
-    return jnp.sum(E * r[..., None, :], axis=-1).astype(dt)
+    return matvec(E, r).astype(dt)
 
 
 @public

@@ -32,6 +32,13 @@ def matmul(a, b):
     return jnp.matmul(a, b, precision=FULL)
 
 
+def matvec(a, x):
+    """``a @ x`` for small ``(..., n, n)`` and ``(..., n)``, broadcasting: elementwise products
+    and a sum, which XLA fuses into the surrounding loop (no ``dot``, so no precision setting
+    and the same bits however the batch dimensions broadcast)."""
+    return jnp.sum(a * x[..., None, :], axis=-1)
+
+
 def eps(dtype) -> float:
     """Machine epsilon of ``dtype`` as a Python float."""
     return float(np.finfo(dtype).eps)
@@ -168,7 +175,7 @@ def _top_eigenvector_jvp(primals, tangents):
     lam, V = jnp.linalg.eigh(K)
     v = V[..., :, -1]
     dK = 0.5 * (dK + jnp.swapaxes(dK, -1, -2))
-    proj = jnp.sum(V * jnp.sum(dK * v[..., None, :], axis=-1)[..., :, None], axis=-2)
+    proj = jnp.sum(V * matvec(dK, v)[..., :, None], axis=-2)
     gap = lam[..., -1:] - lam
     tol = TIE_ULPS * eps(K.dtype) * jnp.max(jnp.abs(lam), axis=-1, keepdims=True)
     coef = safe_div(proj, gap, tol)  # the top eigenvector itself has gap 0 -> coefficient 0
