@@ -179,4 +179,4 @@ def _top_eigenvector_jvp(primals, tangents):
     gap = lam[..., -1:] - lam
     tol = TIE_ULPS * eps(K.dtype) * jnp.max(jnp.abs(lam), axis=-1, keepdims=True)
     coef = safe_div(proj, gap, tol)  # the top eigenvector itself has gap 0 -> coefficient 0
-    return v, jnp.sum(V * coef[..., None, :], axis=-1)
+    return v, matvec(V, coef)
