@@ -5,9 +5,16 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
 
-from ._numerics import as_float, check_shape, from_scalar_last, matvec, public, top_eigenvector
+from ._numerics import (
+    as_float,
+    check_shape,
+    from_scalar_last,
+    matvec,
+    public,
+    rsqrt,
+    top_eigenvector,
+)
 
 METHODS = ("shepperd", "markley", "optimal")
 
@@ -68,7 +75,7 @@ def _selected_column(R):
 def _hemisphere_scale(v, sq):
     """``1 / |v|`` (``sq = |v|^2``), negated where ``w < 0``: ``v * scale`` is the unit
     quaternion with ``w >= 0``."""
-    s = lax.rsqrt(sq)
+    s = rsqrt(sq)
     return jnp.where(v[3] < 0, -s, s)
 
 
