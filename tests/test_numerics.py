@@ -1,0 +1,57 @@
+"""The private numerical kernels that the public functions' accuracy rests on."""
+
+import jax
+import jax.numpy as jnp
+import mpmath as mp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from rotjax._matrix import _selected_column
+from rotjax._numerics import rsqrt
+
+mp.mp.prec = 200
+# Exponent ranges of normal numbers, and the documented accuracy of rsqrt.
+RANGE = {np.float32: (-37.5, 38.0), np.float64: (-307.5, 308.0)}
+RSQRT_BOUND_EPS = 0.63
+
+
+def _rsqrt_arguments(dtype, n, seed):
+    rng = np.random.default_rng(seed)
+    lo, hi = RANGE[dtype]
+    dense = rng.uniform(1.0, 4.0, n)  # one period of the initial guess's error
+    wide = 10.0 ** rng.uniform(lo, hi, n)
+    return np.concatenate([dense, wide, [1.0, 2.0, 4.0]]).astype(dtype)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_rsqrt_is_within_its_documented_bound(dtype):
+    x = _rsqrt_arguments(dtype, 4000, seed=7)
+    got = np.asarray(jax.jit(rsqrt)(jnp.asarray(x)))
+    assert got.dtype == dtype
+    err = [
+        float(abs(mp.mpf(float(g)) * mp.sqrt(mp.mpf(float(a))) - 1))
+        for g, a in zip(got, x, strict=True)
+    ]
+    eps = float(np.finfo(dtype).eps)
+    assert max(err) / eps <= RSQRT_BOUND_EPS, max(err) / eps
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_rsqrt_derivatives_and_nan(dtype):
+    x = jnp.asarray([0.25, 1.0, 3.0, 1e6], dtype)
+    g = jax.vmap(jax.grad(rsqrt))(x)
+    want = -0.5 * np.asarray(x, np.float64) ** -1.5
+    np.testing.assert_allclose(g, want, rtol=4 * np.finfo(dtype).eps)
+    h = jax.grad(jax.grad(rsqrt))(jnp.asarray(4.0, dtype))
+    np.testing.assert_allclose(h, 0.75 * 4.0**-2.5, rtol=8 * np.finfo(dtype).eps)
+    assert np.isnan(rsqrt(jnp.asarray(np.nan, dtype)))
+
+
+@given(arrays(np.float64, (3, 3), elements=st.floats(-1e150, 1e150)))
+def test_selected_column_norm_is_at_least_one_for_any_finite_matrix(R):
+    """rsqrt's domain in matrix_to_quaternion: the selected column's squared norm is >= 1."""
+    _, sq = _selected_column(jnp.asarray(R))
+    assert float(sq) >= 1.0
