@@ -418,7 +418,7 @@ def _matrix_to_euler_jvp(seq, primals, tangents):
     # (The benchmark: jit(grad) over forward went from 0.21x to 0.42-0.51x in float32.)
     (R,), (dR,) = primals, tangents
     c, sq = _selected_column(R)
-    s = _hemisphere_scale(c, sq)
+    s = _hemisphere_scale(c, sq, jax.lax.rsqrt)
     comps = [x * s for x in c]  # the Shepperd quaternion, not stacked
     pat = _tangent_patterns(seq).astype(R.dtype)
 
