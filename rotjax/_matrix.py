@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -81,7 +83,8 @@ def _hemisphere_scale(v, sq, root=rsqrt):
     ``root``: :func:`rsqrt` (default), which XLA fuses into the loop that writes the four
     components; ``lax.rsqrt`` in derivative rules, where the scale feeds many consumers and XLA
     should compute it once rather than inside each (with the fused form ``matrix_to_euler``'s
-    ``jit(grad)`` fell from 0.44x to 0.08x of its forward pass in the benchmark).
+    ``jit(grad)`` fell from 0.44x to 0.08x of its forward pass in the benchmark; an optimisation
+    barrier on the fused form did not help: 0.10x in an ad-hoc timing).
     """
     s = root(sq)
     return jnp.where(v[3] < 0, -s, s)
@@ -96,9 +99,12 @@ def _stack_last(v, scale):
     return jnp.moveaxis(jnp.stack(v, axis=0) * scale, 0, -1)
 
 
-@jax.custom_jvp
-def _shepperd(R):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _shepperd(R, root=rsqrt):
     """Shepperd extraction, scalar last, ``w >= 0``: the selected column of ``K`` over its norm.
+
+    ``root`` computes the scale (see :func:`_hemisphere_scale`): ``matrix_to_euler`` passes
+    ``lax.rsqrt``, so that its derivative rule, which needs the scale too, sees the same bits.
 
     Written for XLA:CPU, measured with ``python -m rotjax bench``: every step is a per-rotation
     scalar expression (no reduction over a stacked axis); the four components are selected
@@ -113,7 +119,7 @@ def _shepperd(R):
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
-    return _stack_last(c, _hemisphere_scale(c, sq))
+    return _stack_last(c, _hemisphere_scale(c, sq, root))
 
 
 def _shepperd_tangent(R, dR):
@@ -164,10 +170,10 @@ def _rotation_tangent(R, dR):
 
 
 @_shepperd.defjvp
-def _shepperd_jvp(primals, tangents):
+def _shepperd_jvp(root, primals, tangents):
     (R,), (dR,) = primals, tangents
     _, _, dq = _shepperd_tangent(R, dR)
-    return _shepperd(R), jnp.stack(dq, axis=-1)
+    return _shepperd(R, root), jnp.stack(dq, axis=-1)
 
 
 def _dk_pattern():
