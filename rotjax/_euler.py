@@ -301,13 +301,14 @@ def _quat_to_euler(q, seq, stacked):
     # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
     # `stacked=False` (quaternion_to_euler): the three atan2 are evaluated on per-rotation
     # arrays and their results stacked on the last axis, and XLA:CPU compiles the whole
-    # extraction to one loop (two for Tait-Bryan sequences). `stacked=True` (matrix_to_euler, after the Shepperd step): the
-    # three numerators and denominators are stacked first and atan2 runs once on (..., 3)
-    # arrays. In ad-hoc timings each form was the faster one where it is used (2^20 rotations:
-    # quaternion_to_euler 1.34x / 1.76x faster per-rotation in float32 / float64, which
-    # compiled to one or two loops instead of three; matrix_to_euler 1.16x / 1.33x slower with it).
-    # Both give the same bits. Stacking the results on a leading axis and moving it last made
-    # XLA:CPU emit a transposing loop that LLVM did not vectorize in float64.
+    # extraction to one loop (two for Tait-Bryan sequences). `stacked=True` (matrix_to_euler,
+    # after the Shepperd step): the three numerators and denominators are stacked first and
+    # atan2 runs once on (..., 3) arrays. In ad-hoc timings each form was the faster one where
+    # it is used (2^20 rotations: quaternion_to_euler 1.34x / 1.76x faster per-rotation in
+    # float32 / float64, which compiled to one or two loops instead of three; matrix_to_euler
+    # 1.16x / 1.33x slower with it). Both give the same bits. Stacking the results on a leading
+    # axis and moving it last made XLA:CPU emit a transposing loop that LLVM did not vectorize
+    # in float64.
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
