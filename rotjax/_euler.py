@@ -299,16 +299,16 @@ def _quat_to_euler(q, seq, stacked):
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
     # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
-    # `stacked=False` (quaternion_to_euler): the three atan2 are evaluated on per-rotation
-    # arrays and their results stacked on the last axis, and XLA:CPU compiles the whole
-    # extraction to one loop (two for Tait-Bryan sequences). `stacked=True` (matrix_to_euler,
-    # after the Shepperd step): the three numerators and denominators are stacked first and
-    # atan2 runs once on (..., 3) arrays. In ad-hoc timings each form was the faster one where
-    # it is used (2^20 rotations: quaternion_to_euler 1.34x / 1.76x faster per-rotation in
-    # float32 / float64, which compiled to one or two loops instead of three; matrix_to_euler
-    # 1.16x / 1.33x slower with it). Both give the same bits. Stacking the results on a leading
-    # axis and moving it last made XLA:CPU emit a transposing loop that LLVM did not vectorize
-    # in float64.
+    # `stacked=False`: the three atan2 are evaluated on per-rotation arrays and their results
+    # stacked on the last axis; quaternion_to_euler compiles to one loop (two for Tait-Bryan
+    # sequences). `stacked=True`: the three numerators and denominators are stacked first and
+    # atan2 runs once on (..., 3) arrays (three loops). Both give the same bits. Interleaved
+    # ad-hoc timings, 2^20 rotations, per-rotation time over stacked time (float32 / float64):
+    # quaternion_to_euler 0.61-0.73 / 0.46-0.48 on four sequences of both kinds, so it always
+    # uses per-rotation; matrix_to_euler (after the Shepperd step) 0.48-0.52 / 0.42-0.44 on
+    # proper sequences but 1.36-1.57 / 1.74-1.79 on Tait-Bryan ones, so it stacks for those
+    # only. Stacking the results on a leading axis and moving it last made XLA:CPU emit a
+    # transposing loop that LLVM did not vectorize in float64.
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
@@ -418,7 +418,7 @@ def _tangent_patterns(seq):
 def _matrix_to_euler(R, seq):
     # The Shepperd scale from lax.rsqrt, as in the rule below, which must see the same
     # quaternion: near gimbal lock an ulp in it moves the angles' derivative by 7e-7 relative.
-    return _quat_to_euler(_shepperd(R, jax.lax.rsqrt), seq, True)
+    return _quat_to_euler(_shepperd(R, jax.lax.rsqrt), seq, not is_proper(seq))
 
 
 @_matrix_to_euler.defjvp
