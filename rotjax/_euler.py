@@ -8,7 +8,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._matrix import _hemisphere_scale, _rotation_tangent, _selected_column, _shepperd
+from ._matrix import (
+    _divide_split,
+    _rotation_tangent,
+    _selected_column,
+    _shepperd_divided,
+    _signed_norm,
+)
 from ._numerics import (
     as_float,
     check_shape,
@@ -288,8 +294,8 @@ def _substitute(abcd, locks):
 _LAST = np.array([False, False, True])
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
-def _quat_to_euler(q, seq, stacked):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _quat_to_euler(q, seq):
     """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold.
 
     ``q`` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
@@ -299,26 +305,17 @@ def _quat_to_euler(q, seq, stacked):
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
     # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
-    # `stacked=False`: the three atan2 are evaluated on per-rotation arrays and their results
-    # stacked on the last axis; quaternion_to_euler compiles to one loop (two for Tait-Bryan
-    # sequences). `stacked=True`: the three numerators and denominators are stacked first and
-    # atan2 runs once on (..., 3) arrays (three loops). Both give the same bits. Interleaved
-    # ad-hoc timings, 2^20 rotations, per-rotation time over stacked time (float32 / float64):
-    # quaternion_to_euler 0.61-0.73 / 0.46-0.48 on four sequences of both kinds, so it always
-    # uses per-rotation; matrix_to_euler (after the Shepperd step) 0.48-0.52 / 0.42-0.44 on
-    # proper sequences but 1.36-1.57 / 1.74-1.79 on Tait-Bryan ones, so it stacks for those
-    # only. Stacking the results on a leading axis and moving it last made XLA:CPU emit a
-    # transposing loop that LLVM did not vectorize in float64.
+    # The three atan2 run on per-rotation arrays and their results are stacked on the last
+    # axis: XLA:CPU compiles the extraction to one loop (two for Tait-Bryan sequences).
+    # Stacking the three numerators and denominators first and running atan2 once on (..., 3)
+    # arrays gave the same bits in three loops (interleaved ad-hoc timings, 2^20 rotations:
+    # 1.4-2.2x slower on four sequences of both kinds). Stacking the results on a leading axis
+    # and moving it last made XLA:CPU emit a transposing loop that LLVM did not vectorize in
+    # float64.
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
-    if stacked:
-        ang = _atan2(
-            jnp.stack([num[n] for n in order], axis=-1),
-            jnp.stack([den[n] for n in order], axis=-1),
-        )
-    else:
-        ang = jnp.stack([_atan2(num[n], den[n]) for n in order], axis=-1)
+    ang = jnp.stack([_atan2(num[n], den[n]) for n in order], axis=-1)
     out = ang * np.array(factor, dtype=ang.dtype) + np.array(shift, dtype=ang.dtype)
     # The substitution makes the zeroed angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: set it exactly.
@@ -393,12 +390,12 @@ def _contract(jac, dx):
 
 
 @_quat_to_euler.defjvp
-def _quat_to_euler_jvp(seq, stacked, primals, tangents):
+def _quat_to_euler_jvp(seq, primals, tangents):
     # The exact derivative of the code above (see _euler_jacobian).
     (q,), (dq,) = primals, tangents
     e = [jnp.asarray(v, dtype=q.dtype) for v in _abcd_patterns(seq)]
     jac = _euler_jacobian([q[..., i] for i in range(4)], seq, 4, lambda _: e)
-    return _quat_to_euler(q, seq, stacked), _contract(jac, dq)
+    return _quat_to_euler(q, seq), _contract(jac, dq)
 
 
 @functools.cache
@@ -416,9 +413,16 @@ def _tangent_patterns(seq):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def _matrix_to_euler(R, seq):
-    # The Shepperd scale from lax.rsqrt, as in the rule below, which must see the same
-    # quaternion: near gimbal lock an ulp in it moves the angles' derivative by 7e-7 relative.
-    return _quat_to_euler(_shepperd(R, jax.lax.rsqrt), seq, not is_proper(seq))
+    # The Shepperd quaternion, written out interleaved by one loop, then quaternion_to_euler's
+    # loop. It is the selected column divided by its norm (not multiplied by a reciprocal
+    # square root): XLA:CPU then writes it out once. With lax.rsqrt it recomputed parts of it
+    # inside the extraction (three to five loops instead of two) and ran 1.8-2.4x slower
+    # (interleaved ad-hoc timings, 2^20 matrices, "xyz" and "ZXZ", float32 and float64; with
+    # the fused rsqrt, slower still). The division is also the more accurate form
+    # (largest error against the exact normalisation of the column, 2e5 matrices: 0.86 / 0.87
+    # eps against 1.16 / 1.11 with lax.rsqrt). The rule below divides alike, so it sees the
+    # same bits: near gimbal lock an ulp in q moves the angles' derivative by 7e-7 relative.
+    return _quat_to_euler(_shepperd_divided(R), seq)
 
 
 @_matrix_to_euler.defjvp
@@ -426,13 +430,14 @@ def _matrix_to_euler_jvp(seq, primals, tangents):
     # The chain rule through the Shepperd quaternion q, with its tangent-space rule
     # dq = 1/2 q (x) (v, 0), v = vee(R^T dR) (see _shepperd_tangent): the angles' derivatives
     # are taken directly with respect to u = v / 2 = _rotation_tangent / 4, three components
-    # rather than four, so that JAX's transpose does not go through dq; the Shepperd
-    # quaternion is kept as four per-rotation arrays (stacking it cost a transposing loop).
-    # (The benchmark: jit(grad) over forward went from 0.21x to 0.42-0.51x in float32.)
+    # rather than four, so that JAX's transpose does not go through dq (the benchmark: jit(grad)
+    # over forward went from 0.21x to 0.42-0.51x in float32). The Shepperd quaternion is split
+    # from the stacked quotient: XLA writes it once, interleaved (ad hoc, jit(grad) took
+    # 0.75-0.87x the time of four per-rotation products with lax.rsqrt, and 0.9-1.05x as four
+    # per-rotation divisions).
     (R,), (dR,) = primals, tangents
     c, sq = _selected_column(R)
-    s = _hemisphere_scale(c, sq, jax.lax.rsqrt)
-    comps = [x * s for x in c]  # the Shepperd quaternion, not stacked
+    comps = _divide_split(c, _signed_norm(c, sq))  # _shepperd_divided's bits, as four arrays
     pat = _tangent_patterns(seq).astype(R.dtype)
 
     def patterns(wide):
@@ -520,7 +525,7 @@ def quaternion_to_euler(q, seq: str, degrees: bool = False, scalar_first: bool =
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     parse_seq(seq)
-    ang = _quat_to_euler(to_scalar_last(q, scalar_first), seq, False)
+    ang = _quat_to_euler(to_scalar_last(q, scalar_first), seq)
     if degrees:
         ang = jnp.rad2deg(ang)
     return ang.astype(dt)

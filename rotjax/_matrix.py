@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -81,10 +79,10 @@ def _hemisphere_scale(v, sq, root=rsqrt):
     ``w < 0``: ``v * scale`` is the unit quaternion with ``w >= 0``.
 
     ``root``: :func:`rsqrt` (default), which XLA fuses into the loop that writes the four
-    components; ``lax.rsqrt`` in derivative rules, where the scale feeds many consumers and XLA
-    should compute it once rather than inside each (with the fused form ``matrix_to_euler``'s
-    ``jit(grad)`` fell from 0.44x to 0.08x of its forward pass in the benchmark; an optimisation
-    barrier on the fused form did not help: 0.10x in an ad-hoc timing).
+    components; ``lax.rsqrt`` in a derivative rule, where the scale feeds many consumers and XLA
+    should compute it once rather than inside each (with the fused form, ``matrix_to_euler``'s
+    ``jit(grad)`` fell from 0.44x to 0.08x of its forward pass in the benchmark, when its rule
+    took the scale from here; an optimisation barrier on the fused form did not help).
     """
     s = root(sq)
     return jnp.where(v[3] < 0, -s, s)
@@ -99,12 +97,9 @@ def _stack_last(v, scale):
     return jnp.moveaxis(jnp.stack(v, axis=0) * scale, 0, -1)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
-def _shepperd(R, root=rsqrt):
+@jax.custom_jvp
+def _shepperd(R):
     """Shepperd extraction, scalar last, ``w >= 0``: the selected column of ``K`` over its norm.
-
-    ``root`` computes the scale (see :func:`_hemisphere_scale`): ``matrix_to_euler`` passes
-    ``lax.rsqrt``, so that its derivative rule, which needs the scale too, sees the same bits.
 
     Written for XLA:CPU, measured with ``python -m rotjax bench``: every step is a per-rotation
     scalar expression (no reduction over a stacked axis); the four components are selected
@@ -120,7 +115,15 @@ def _shepperd(R, root=rsqrt):
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
-    return _stack_last(c, _hemisphere_scale(c, sq, root))
+    return _stack_last(c, _hemisphere_scale(c, sq))
+
+
+def _signed_norm(c, sq):
+    """``sqrt(sq)`` (``sq = |c|^2``) with the sign of ``c[3]``: ``c / n`` is the unit quaternion
+    with ``w >= 0`` (for the selected column, the Shepperd quaternion; up to rounding, ``c``
+    times :func:`_hemisphere_scale`)."""
+    n = jnp.sqrt(sq)
+    return jnp.where(c[3] < 0, -n, n)
 
 
 def _shepperd_tangent(R, dR):
@@ -140,8 +143,7 @@ def _shepperd_tangent(R, dR):
       nine consumers, and is written interleaved in one pass.
     """
     c, sq = _selected_column(R)
-    n = jnp.sqrt(sq)
-    n = 4.0 * jnp.where(c[3] < 0, -n, n)  # q = c / (n / 4); the 1/2 of v and of dq folded in
+    n = 4.0 * _signed_norm(c, sq)  # q = c / (n / 4); the 1/2 of v and of dq folded in
     vx, vy, vz = _divide_split(_rotation_tangent(R, dR), n)
     x, y, z, w = c
     dq = [
@@ -166,9 +168,14 @@ def _divide_split(parts, n):
     0.21-0.29x / 0.21-0.26x over five runs before, 0.24-0.34x / 0.27-0.29x over four after;
     side by side in an ad-hoc interleaved timing, 0.27x -> 0.40x in float32).
     """
-    k = len(parts)
-    v = jnp.stack(parts, axis=-1) / jnp.stack([n] * k, axis=-1)
-    return [t[..., 0] for t in jnp.split(v, k, axis=-1)]
+    return [t[..., 0] for t in jnp.split(_divide_stacked(parts, n), len(parts), axis=-1)]
+
+
+def _divide_stacked(parts, n):
+    """``(..., k)``: the parts (per-rotation arrays) stacked last and divided by ``n`` stacked
+    alike. XLA:CPU keeps the division (a divisor broadcast from ``(..., 1)`` was turned into a
+    multiplication by its reciprocal), so the quotients are the same bits as ``p / n``."""
+    return jnp.stack(parts, axis=-1) / jnp.stack([n] * len(parts), axis=-1)
 
 
 def _rotation_tangent(R, dR):
@@ -188,11 +195,26 @@ def _rotation_tangent(R, dR):
     return [jnp.sum(a * dR, axis=(-2, -1)) for a in rows]
 
 
-@_shepperd.defjvp
-def _shepperd_jvp(root, primals, tangents):
-    (R,), (dR,) = primals, tangents
-    _, _, dq = _shepperd_tangent(R, dR)
-    return _shepperd(R, root), jnp.stack(dq, axis=-1)
+@jax.custom_jvp
+def _shepperd_divided(R):
+    """The Shepperd quaternion as the selected column divided by its signed norm (stacked, see
+    :func:`_divide_stacked`), for ``matrix_to_euler``; its derivative rule uses the same bits
+    through :func:`_divide_split`. Same tangent rule as :func:`_shepperd`."""
+    c, sq = _selected_column(R)
+    return _divide_stacked(c, _signed_norm(c, sq))
+
+
+def _define_shepperd_jvp(f):
+    def jvp(primals, tangents):
+        (R,), (dR,) = primals, tangents
+        _, _, dq = _shepperd_tangent(R, dR)
+        return f(R), jnp.stack(dq, axis=-1)
+
+    f.defjvp(jvp)
+
+
+_define_shepperd_jvp(_shepperd)
+_define_shepperd_jvp(_shepperd_divided)
 
 
 def _dk_pattern():
@@ -251,8 +273,7 @@ def _markley_jvp(primals, tangents):
     cols, _ = _k4_columns(R)
     px, py, pz, pw = (x * s0 for x in c)
     v = _k_times(cols, [px, py, pz, pw])
-    n = jnp.sqrt(sum(x * x for x in v))
-    n = jnp.where(v[3] < 0, -n, n)
+    n = _signed_norm(v, sum(x * x for x in v))
 
     # M_c = sum_a p_a S[c, a]: a broadcast against constant sign patterns, which XLA fuses
     # into the loop that consumes it (stacking the entries made it materialise them).

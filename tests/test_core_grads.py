@@ -338,12 +338,11 @@ def _euler_test_quaternions(seq):
     return jnp.asarray(np.array(qs))
 
 
-def _assert_rule_equals_autodiff(f, seq, x, dx, rng, *static):
-    """The custom jvp of ``f(x, seq, *static)`` (a jax.custom_jvp) and its transpose equal JAX's
-    own derivatives of the undecorated code ``f.fun``, row by row, relative to each row's
-    size."""
-    g = lambda v: f(v, seq, *static)  # noqa: E731
-    g_ref = lambda v: f.fun(v, seq, *static)  # noqa: E731
+def _assert_rule_equals_autodiff(f, seq, x, dx, rng):
+    """The custom jvp of ``f(x, seq)`` (a jax.custom_jvp) and its transpose equal JAX's own
+    derivatives of the undecorated code ``f.fun``, row by row, relative to each row's size."""
+    g = lambda v: f(v, seq)  # noqa: E731
+    g_ref = lambda v: f.fun(v, seq)  # noqa: E731
     out, jv = jax.jvp(g, (x,), (dx,))
     out_ref, jv_ref = jax.jvp(g_ref, (x,), (dx,))
     np.testing.assert_array_equal(out, out_ref)
@@ -358,23 +357,21 @@ def _assert_rule_equals_autodiff(f, seq, x, dx, rng, *static):
     assert_close(gr / scale, gr_ref / scale, atol=1e-14)
 
 
-@pytest.mark.parametrize("stacked", [False, True])
 @pytest.mark.parametrize("seq", SEQS)
-def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq, stacked):
+def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     """quaternion_to_euler's custom jvp (and its transpose) equals JAX's own derivative of the
     forward code, everywhere: generic points of any norm, near and exactly at lock (where the
-    forward code's selects define the gradient rule), 180 degrees; second derivatives too. Both
-    arrangements of the forward code (``stacked``: the one matrix_to_euler uses)."""
+    forward code's selects define the gradient rule), 180 degrees; second derivatives too."""
     from rotjax._euler import _quat_to_euler
 
     q = _euler_test_quaternions(seq)
     rng = np.random.default_rng(5)
     dq = jnp.asarray(rng.normal(size=q.shape)) * jnp.linalg.norm(q, axis=-1, keepdims=True)
-    _assert_rule_equals_autodiff(_quat_to_euler, seq, q, dq, rng, stacked)
+    _assert_rule_equals_autodiff(_quat_to_euler, seq, q, dq, rng)
     f, f_ref = _quat_to_euler, _quat_to_euler.fun
     for x in (q[0] / jnp.linalg.norm(q[0]), q[-4]):  # second derivatives: generic, exact lock
-        h = jax.hessian(lambda x: f(x, seq, stacked))(x)
-        h_ref = jax.hessian(lambda x: f_ref(x, seq, stacked))(x)
+        h = jax.hessian(lambda x: f(x, seq))(x)
+        h_ref = jax.hessian(lambda x: f_ref(x, seq))(x)
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
 
 
