@@ -257,7 +257,8 @@ def _markley(R):
 
 @_markley.defjvp
 def _markley_jvp(primals, tangents):
-    # The exact derivative of the formula (the Shepperd step with its tangent-space rule),
+    # The exact derivative of the formula with the Shepperd step's tangent-space rule inside
+    # (the true derivative on SO(3); off it, within O(sigma) of it: see matrix_to_quaternion),
     # written by hand so that reverse mode compiles to few loops (the benchmark's jit(grad)
     # over forward went from 0.11x to 0.33x in float32, against JAX's own transposition of
     # the forward code):
@@ -353,7 +354,12 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
         matrix is not that of the raw Shepperd formula (which would also react to scaling and
         shear); compose with an explicit projection if that is what you need. For
         ``"markley"`` the gradient is the exact derivative of the power step applied to the
-        Shepperd quaternion (with the rule above for the latter). For
+        Shepperd quaternion (with the rule above for the latter). At a rotation matrix this is
+        the true derivative of the returned quaternion along every direction, off SO(3) too
+        (there ``K = 4 q q^T`` annihilates the Shepperd step's share); for a matrix with noise
+        sigma it deviates from the true derivative by O(sigma): a median 0.45 sigma (relative,
+        random directions), against 2 sigma for the rule above, which would be the cheaper
+        choice. For
         ``"optimal"`` the gradient is that of the top eigenvector (the power step does not
         change it), finite while the top eigenvalue is simple (always, for matrices near a
         rotation).
