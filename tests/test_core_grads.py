@@ -322,8 +322,9 @@ def test_markley_derivative_is_the_true_one_on_so3_in_every_direction():
     step's derivative, so the rule (Shepperd's tangent rule inside) equals the true derivative
     of the returned quaternion along every 3x3 direction, off SO(3) too."""
     R, dR = _noisy_rotations(0.0, 64, seed=5)
-    R = jnp.concatenate([R, jnp.asarray(np.stack(list(SPECIAL_MATRICES.values())))])
-    dR = jnp.concatenate([dR, jnp.asarray(np.random.default_rng(6).normal(size=(7, 3, 3)))])
+    special = np.stack(list(SPECIAL_MATRICES.values()))
+    R = jnp.concatenate([R, jnp.asarray(special)])
+    dR = jnp.concatenate([dR, jnp.asarray(np.random.default_rng(6).normal(size=special.shape))])
     f = lambda m: rj.matrix_to_quaternion(m, method="markley")  # noqa: E731
     _, jv = jax.jvp(f, (R,), (dR,))
     _, ref = jax.jvp(_markley_plain, (R,), (dR,))
