@@ -83,6 +83,7 @@ def _hemisphere_scale(v, sq, root=rsqrt):
     should compute it once rather than inside each (with the fused form, ``matrix_to_euler``'s
     ``jit(grad)`` fell from 0.44x to 0.08x of its forward pass in the benchmark, when its rule
     took the scale from here; an optimisation barrier on the fused form did not help).
+    With ``jnp.sqrt`` it gives the signed norm instead (:func:`_signed_norm`).
     """
     s = root(sq)
     return jnp.where(v[3] < 0, -s, s)
@@ -121,9 +122,8 @@ def _shepperd(R):
 def _signed_norm(c, sq):
     """``sqrt(sq)`` (``sq = |c|^2``) with the sign of ``c[3]``: ``c / n`` is the unit quaternion
     with ``w >= 0`` (for the selected column, the Shepperd quaternion; up to rounding, ``c``
-    times :func:`_hemisphere_scale`)."""
-    n = jnp.sqrt(sq)
-    return jnp.where(c[3] < 0, -n, n)
+    times :func:`_hemisphere_scale`, the same sign rule with the reciprocal root)."""
+    return _hemisphere_scale(c, sq, jnp.sqrt)
 
 
 def _shepperd_tangent(R, dR):

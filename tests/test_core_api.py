@@ -370,7 +370,7 @@ def test_float32_results_are_float32_and_within_8_eps_of_float64(name):
     float32 eps (relative to the largest output, or to 1) of the same call on the same values
     in float64. This would catch a lower precision anywhere inside (a TF32 or bfloat16 matrix
     product, a float16 constant, a float32-only cancellation); the largest measured on CPU is
-    4.8 eps (``rotvec_to_matrix``), most are near 1. Extremes (tiny angles, 180 degrees,
+    4.0 eps (``rotvec_to_matrix``), most are near 1. Extremes (tiny angles, 180 degrees,
     gimbal lock) are covered per function elsewhere and by the benchmark's sets."""
     f, args = EVERY_PUBLIC_1024[name]
     out32 = jax.tree.leaves(f(*args))

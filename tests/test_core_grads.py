@@ -279,29 +279,32 @@ def test_euler_to_matrix_grads_at_lock(seq):
         check_grads(lambda x: rj.euler_to_quaternion(x, seq), (a,), 1, modes=("fwd", "rev"))
 
 
-def _markley_by_autodiff(R):
-    """The "markley" formula written plainly, so that JAX differentiates it itself: the Shepperd
-    quaternion (with its own tangent rule), one product with K, normalised to w >= 0."""
-    from rotjax._matrix import _k4_columns, _shepperd
+def _power_step(R, q0):
+    """The "markley" formula after its first step, written plainly (JAX differentiates it
+    itself): one product with K, normalised to w >= 0."""
+    from rotjax._matrix import _k4_columns
 
-    q0 = _shepperd(R)
     cols, _ = _k4_columns(R)
     v = jnp.stack([sum(cols[i][c] * q0[..., i] for i in range(4)) for c in range(4)], axis=-1)
     v = v / jnp.linalg.norm(v, axis=-1, keepdims=True)
     return jnp.where(v[..., 3:] < 0, -v, v)
 
 
+def _markley_by_autodiff(R):
+    """The power step on the Shepperd quaternion with its own tangent rule: what the custom
+    jvp of "markley" computes."""
+    from rotjax._matrix import _shepperd
+
+    return _power_step(R, _shepperd(R))
+
+
 def _markley_plain(R):
-    """The "markley" formula with no derivative rule anywhere (the Shepperd step included):
+    """The power step on the Shepperd column divided by its norm, no derivative rule anywhere:
     JAX's derivative of it is the true derivative of the quaternion that "markley" returns."""
-    from rotjax._matrix import _k4_columns, _selected_column
+    from rotjax._matrix import _selected_column
 
     c, sq = _selected_column(R)
-    p = jnp.stack(c, axis=-1) / jnp.sqrt(sq)[..., None]
-    cols, _ = _k4_columns(R)
-    v = jnp.stack([sum(cols[i][k] * p[..., i] for i in range(4)) for k in range(4)], axis=-1)
-    v = v / jnp.linalg.norm(v, axis=-1, keepdims=True)
-    return jnp.where(v[..., 3:] < 0, -v, v)
+    return _power_step(R, jnp.stack(c, axis=-1) / jnp.sqrt(sq)[..., None])
 
 
 def _noisy_rotations(sigma, n, seed):
