@@ -95,6 +95,11 @@ def main(argv: list[str] | None = None) -> int:
         "--log2-batch", type=int, default=None, help="batch of 2^N rotations (default 20; 16 quick)"
     )
     args = p.parse_args(argv)
+    from .cases import CASES
+
+    unknown = sorted(set(args.ops.split(",") if args.ops else ()) - set(CASES))
+    if unknown:
+        p.error(f"unknown operations {unknown}; expected some of {sorted(CASES)}")
     if any(os.environ.get(k) != v for k, v in MALLOC_ENV.items()):
         # glibc reads these once, at start-up: run the measurement in a child that has them.
         env = {**os.environ, **MALLOC_ENV}

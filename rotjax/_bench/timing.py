@@ -25,7 +25,7 @@ def copy_kernel(n_in: int, n_out: int):
             out = x[:, :n_out]
             for k in range(n_out, n_in, n_out):
                 chunk = x[:, k : k + n_out]
-                out = out + (chunk if chunk.shape[1] == n_out else chunk[:, :1])
+                out = out + jnp.pad(chunk, ((0, 0), (0, n_out - chunk.shape[1])))
             return out
         reps = -(-n_out // n_in)
         return jnp.concatenate([x + x[:, :1]] * reps, axis=1)[:, :n_out]
