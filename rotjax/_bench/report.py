@@ -132,8 +132,16 @@ def markdown_table(meta, rows) -> str:
     return "\n".join(out) + "\n"
 
 
-def _eps(v):
-    return "-" if v is None else f"{v:.2g} eps"
+def _num(v):
+    """Three significant digits, without an exponent up to 10^7."""
+    return f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}"
+
+
+def _eps(r):
+    """The largest error; "NaN" where some output was not finite (written as null)."""
+    if r["err_max_eps"] is not None:
+        return f"{r['err_max_eps']:.2g} eps"
+    return "NaN output" if r["err_by_set"] else "-"
 
 
 def headline(meta, rows, dtype="float64") -> str:
@@ -153,13 +161,13 @@ def headline(meta, rows, dtype="float64") -> str:
         own = by.get((op, "rotjax"))
         if own is None:
             continue
-        cells = [f"{own['mrot_s']:.3g} Mrot/s, {_eps(own['err_max_eps'])}"]
+        cells = [f"{_num(own['mrot_s'])} Mrot/s, {_eps(own)}"]
         for p in PEERS:
             r = by.get((op, p))
             if r is None or not r["vs_rotjax"]:
                 cells.append("-")
             else:
-                cells.append(f"{1 / r['vs_rotjax']:.2g}x, {_eps(r['err_max_eps'])}")
+                cells.append(f"{_num(1 / r['vs_rotjax'])}x, {_eps(r)}")
         out.append(f"| {op} | " + " | ".join(cells) + " |")
     out += ["", provenance(meta)]
     return "\n".join(out) + "\n"
