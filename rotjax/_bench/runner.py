@@ -36,7 +36,7 @@ def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
     rounds = 3 if quick else 21  # medians of per-round ratios: enough rounds to outvote bursts
     n_acc = 8 if quick else 96
     per_seq = 4 if quick else 8
-    # Accuracy of Euler extraction: every sequence in a full run, one of each kind in --quick.
+    # Accuracy of Euler extraction: all 24 sequences; --quick: one of each kind.
     seqs = ["xyz", "ZXZ"] if quick else SEQS
     eager_reps = 10 if quick else 100
     rng = np.random.default_rng(2024)
