@@ -12,14 +12,23 @@ from ._fitting import nined_to_matrix as nined_to_matrix
 from ._fitting import quaternion_mean as quaternion_mean
 from ._fitting import sixd_to_matrix as sixd_to_matrix
 from ._fitting import slerp as slerp
+from ._kinematics import (
+    angular_acceleration_to_euler_accelerations as angular_acceleration_to_euler_accelerations,
+)
 from ._kinematics import angular_velocity_to_euler_rates as angular_velocity_to_euler_rates
 from ._kinematics import (
     angular_velocity_to_matrix_derivative as angular_velocity_to_matrix_derivative,
+)
+from ._kinematics import (
+    euler_accelerations_to_angular_acceleration as euler_accelerations_to_angular_acceleration,
 )
 from ._kinematics import euler_rate_matrix as euler_rate_matrix
 from ._kinematics import euler_rates_to_angular_velocity as euler_rates_to_angular_velocity
 from ._kinematics import euler_singularity as euler_singularity
 from ._kinematics import integrate_angular_velocity as integrate_angular_velocity
+from ._kinematics import (
+    integrate_angular_velocity_samples as integrate_angular_velocity_samples,
+)
 from ._kinematics import (
     matrix_derivative_to_angular_velocity as matrix_derivative_to_angular_velocity,
 )
@@ -28,7 +37,9 @@ from ._kinematics import (
     quaternion_derivative_to_angular_velocity as quaternion_derivative_to_angular_velocity,
 )
 from ._kinematics import unwrap_euler as unwrap_euler
+from ._kinematics import unwrap_quaternion as unwrap_quaternion
 from ._matrix import matrix_to_quaternion as matrix_to_quaternion
+from ._partition import partition_coordinates as partition_coordinates
 from ._quaternion import angle_between as angle_between
 from ._quaternion import quaternion_apply as quaternion_apply
 from ._quaternion import quaternion_conjugate as quaternion_conjugate
