@@ -677,7 +677,7 @@ def _step_rotvecs(w, h, frame, method):
     a = jnp.sum(wts[:, 0] * stencil, axis=1)  # w at the first Gauss node
     b = jnp.sum(wts[:, 1] * stencil, axis=1)
     # Fourth-order Magnus with Gauss nodes: Omega = h/2 (A1 + A2) + sqrt(3)/12 h^2 [A2, A1].
-    return h * (a + b) / 2 + (sign * np.sqrt(3.0) / 12) * h * h * cross(a, b)
+    return h * (a + b) / 2 + (sign * float(np.sqrt(3.0)) / 12) * h * h * cross(a, b)
 
 
 @public
