@@ -671,11 +671,12 @@ def _step_rotvecs(w, h, frame, method):
         a, b = w[:-1], w[1:]
         return h * (a + b) / 2 + (sign / 12) * h * h * cross(a, b)
     start, weights = _gauss_weights(w.shape[0])
-    p = weights.shape[-1]
-    stencil = w[start[:, None] + np.arange(p)[None, :]]  # (T, p, ..., 3)
     wts = jnp.asarray(weights, w.dtype).reshape(weights.shape + (1,) * (w.ndim - 1))
-    a = jnp.sum(wts[:, 0] * stencil, axis=1)  # w at the first Gauss node
-    b = jnp.sum(wts[:, 1] * stencil, axis=1)
+    a = b = jnp.zeros_like(w[:-1])
+    for j in range(weights.shape[-1]):  # one gathered copy of the log per stencil point
+        wj = w[start + j]
+        a = a + wts[:, 0, j] * wj  # w at the first Gauss node
+        b = b + wts[:, 1, j] * wj
     # Fourth-order Magnus with Gauss nodes: Omega = h/2 (A1 + A2) + sqrt(3)/12 h^2 [A2, A1].
     return h * (a + b) / 2 + (sign * float(np.sqrt(3.0)) / 12) * h * h * cross(a, b)
 
