@@ -390,6 +390,17 @@ def angular_velocity_to_matrix_derivative(R, omega, frame: str = "body"):
 # --- attitude propagation ----------------------------------------------------------------------
 
 
+def _propagation_args(q, omega, frame, method, methods, name):
+    """Validated ``(q, omega, out_dtype)`` for the integrators (a bad frame or method raises)."""
+    (q, w), out_dt = as_float(q, omega)
+    check_shape(q, (4,), name)
+    check_shape(w, (3,), "omega")
+    _check_frame(frame)
+    if method not in methods:
+        raise ValueError(f"method must be one of {methods}, got {method!r}")
+    return q, w, out_dt
+
+
 @public
 def integrate_angular_velocity(
     q, omega, dt, frame: str = "body", method: str = "exponential", scalar_first: bool = False
@@ -425,12 +436,7 @@ def integrate_angular_velocity(
             step = lambda q, w: (integrate_angular_velocity(q, w, dt),) * 2
             q_end, q_traj = jax.lax.scan(step, q0, omegas)
     """
-    (q, w), out_dt = as_float(q, omega)
-    check_shape(q, (4,), "q")
-    check_shape(w, (3,), "omega")
-    _check_frame(frame)
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    q, w, out_dt = _propagation_args(q, omega, frame, method, METHODS, "q")
     h = jnp.asarray(dt).astype(q.dtype)[..., None]
     q = to_scalar_last(q, scalar_first)
     if method == "exponential":
@@ -718,12 +724,7 @@ def integrate_angular_velocity_samples(
         composed with ``lax.associative_scan``: depth ``O(log T)``. The zero ``q0`` gives NaN;
         a NaN sample affects the attitudes from the steps that read it onwards.
     """
-    (q, w), out_dt = as_float(q0, omega)
-    check_shape(q, (4,), "q0")
-    check_shape(w, (3,), "omega")
-    _check_frame(frame)
-    if method not in SAMPLE_METHODS:
-        raise ValueError(f"method must be one of {SAMPLE_METHODS}, got {method!r}")
+    q, w, out_dt = _propagation_args(q0, omega, frame, method, SAMPLE_METHODS, "q0")
     if w.ndim < 2:
         raise ValueError(f"omega: expected shape (T + 1, ..., 3), got {tuple(w.shape)}")
     h = jnp.asarray(dt).astype(q.dtype)
