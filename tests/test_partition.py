@@ -170,7 +170,7 @@ def test_gradient_matches_finite_differences():
     """Away from pivot changes the influence matrix is a smooth function of the Jacobian."""
     J = jnp.asarray(_rng(5).normal(size=(2, 5)))
     check_grads(
-        lambda x: rj.partition_coordinates(x).influence, (J,), order=2, modes=("fwd", "rev")
+        lambda x: rj.partition_coordinates(x).influence, (J,), order=1, modes=("fwd", "rev")
     )
     g = jax.grad(lambda x: jnp.sum(rj.partition_coordinates(x).influence[:1]))(
         jnp.zeros((2, 5)).at[0, 0].set(1.0)
