@@ -435,6 +435,11 @@ def integrate_angular_velocity(
 
             step = lambda q, w: (integrate_angular_velocity(q, w, dt),) * 2
             q_end, q_traj = jax.lax.scan(step, q0, omegas)
+
+        Holding each sample makes the result first order in the sample interval, whatever the
+        method: ``"rk4"`` integrates the held signal accurately, not the motion between the
+        samples. For a log of samples, :func:`integrate_angular_velocity_samples` reads
+        ``omega`` between them (second or fourth order).
     """
     q, w, out_dt = _propagation_args(q, omega, frame, method, METHODS, "q")
     h = jnp.asarray(dt).astype(q.dtype)[..., None]

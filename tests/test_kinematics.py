@@ -603,6 +603,8 @@ def _all_public(a, w, q, R):
         "wR": rj.matrix_derivative_to_angular_velocity(R, R @ R),
         "q1": rj.integrate_angular_velocity(q, w, 0.1, method="rk4"),
         "q2": rj.integrate_angular_velocity(q, w, 0.1, frame="world"),
+        "al": rj.euler_accelerations_to_angular_acceleration(a, w, a, seq, frame="world"),
+        "aa": rj.angular_acceleration_to_euler_accelerations(a, w, a, seq, damping=0.1),
         "q3": rj.integrate_angular_velocity(q, w, 0.1, method="euler"),
     }
 
