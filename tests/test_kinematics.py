@@ -976,9 +976,11 @@ def test_unwrap_quaternion_nan_stays_local():
     last finite one, so the rest of the series is what it would be without the bad sample."""
     q, flips = _smooth_series(12, (2,), seed=30)
     x = q * flips
+    if np.dot(x[3, 0], x[6, 0]) > 0:  # make the sample after the gap need a flip
+        x[6:, 0] *= -1
     bad = x.copy()
-    bad[4, 0, 2] = np.nan
-    bad[5, 0] = np.inf
+    bad[4, 0, 2] = np.inf
+    bad[5, 0] = np.nan
     bad[0, 1] = np.nan  # a bad first sample: the first finite one keeps its sign
     out = np.asarray(rj.unwrap_quaternion(bad))
     keep0 = np.r_[0:4, 6:12]
