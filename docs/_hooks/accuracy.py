@@ -160,10 +160,22 @@ def _peers_table(rows) -> str:
 
 
 def _meta_line(meta) -> str:
-    return (
-        f"Measured: `docs/bench.json`, {meta['date'][:10]}, {meta['machine']['cpu']} "
-        f"({meta['machine']['cores']} cores), {meta['device']}, jax {meta['jax']}."
+    machine = meta["machine"]
+    batch = meta["batch"]
+    line = (
+        f"Measured: `docs/bench.json`, {meta['date'][:10]}, "
+        f"{'quick' if meta.get('quick') else 'full'} run, batch {batch}"
+        f"{f' (2^{batch.bit_length() - 1})' if batch & (batch - 1) == 0 else ''}; "
+        f"{machine['cpu']}, {machine['cores']} cores, {machine['platform']}; "
+        f"backend {meta['device'].split(':')[0]}, jax {meta['jax']}."
     )
+    later = meta.get("rows_from_a_later_run")
+    if later:
+        ops = ", ".join(f"`{op}`" for op in later["ops"])
+        line += (
+            f" The rows for {ops} come from a later run ({later['date'][:10]})."
+        )
+    return line
 
 
 def on_page_markdown(markdown, page, config, files):
