@@ -172,9 +172,7 @@ def _meta_line(meta) -> str:
     later = meta.get("rows_from_a_later_run")
     if later:
         ops = ", ".join(f"`{op}`" for op in later["ops"])
-        line += (
-            f" The rows for {ops} come from a later run ({later['date'][:10]})."
-        )
+        line += f" The rows for {ops} come from a later run ({later['date'][:10]})."
     return line
 
 
