@@ -504,7 +504,9 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
     # b = pi - a1 when i != k and b = -a1 when i == k (rotating by pi about e_i flips e_j).
     flip = np.array([1.0, -1.0, 1.0])
     offset = np.array([np.pi, 0.0 if is_proper(seq) else np.pi, np.pi])
-    flip, offset = jnp.asarray(flip, x.dtype), jnp.asarray(offset, x.dtype)
+    lead = (1,) * (x.ndim - 2)  # explicit ranks: no implicit rank promotion
+    flip = jnp.asarray(flip, x.dtype).reshape(lead + (3,))
+    offset = jnp.asarray(offset, x.dtype).reshape(lead + (3,))
 
     def nearest(c, prev):
         return c + two_pi * jnp.round((prev - c) / two_pi)

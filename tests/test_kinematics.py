@@ -800,8 +800,10 @@ def test_samples_constant_omega_exact(method, frame):
     q0 = rj.quaternion_normalize(jnp.asarray([0.3, -0.2, 0.5, 0.8]))
     w = jnp.asarray([1.3, -2.1, 0.4])
     ts = 0.07 * np.arange(9)
-    q = rj.integrate_angular_velocity_samples(q0, jnp.broadcast_to(w, (9, 3)), 0.07, frame, method)
-    assert_same_rotation(q, _quat_path(q0, w, frame, ts[:, None]), atol=1e-14)
+    ws = jnp.broadcast_to(w, (9, 3))
+    q = rj.integrate_angular_velocity_samples(q0, ws, 0.07, frame, method)
+    want = _quat_path(jnp.broadcast_to(q0, (9, 4)), ws, frame, ts[:, None])
+    assert_same_rotation(q, want, atol=1e-14)
 
 
 @pytest.mark.parametrize("frame", FRAMES)
