@@ -348,6 +348,22 @@ def _every_public(q, r, w, a):
             lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="rk4"),
             (q, w),
         ),
+        "integrate_angular_velocity_samples": (
+            lambda q, w: rj.integrate_angular_velocity_samples(q, w[:4, None], 0.01),
+            (q, w),
+        ),
+        "unwrap_quaternion": (rj.unwrap_quaternion, (q,)),
+        "euler_accelerations_to_angular_acceleration": (
+            lambda a, w: rj.euler_accelerations_to_angular_acceleration(a, w, w[::-1], "ZYX"),
+            (a, w),
+        ),
+        "angular_acceleration_to_euler_accelerations": (
+            lambda a, w: rj.angular_acceleration_to_euler_accelerations(
+                a, w, w[::-1], "ZYX", damping=0.1
+            ),
+            (a, w),
+        ),
+        "partition_coordinates": (lambda r: rj.partition_coordinates(r[:, :2]).influence, (r,)),
     }
 
 
