@@ -1,5 +1,11 @@
 """rotjax: 3-D rotation maths in JAX, branch-free and differentiable everywhere it can be."""
 
+from ._algebra import quaternion_canonical as quaternion_canonical
+from ._algebra import quaternion_power as quaternion_power
+from ._algebra import quaternion_reduce as quaternion_reduce
+from ._algebra import rotation_group as rotation_group
+from ._algebra import wahba_sensitivity as wahba_sensitivity
+from ._davenport import davenport_to_quaternion as davenport_to_quaternion
 from ._euler import euler_to_matrix as euler_to_matrix
 from ._euler import euler_to_quaternion as euler_to_quaternion
 from ._euler import matrix_to_euler as matrix_to_euler
@@ -29,6 +35,8 @@ from ._kinematics import (
 )
 from ._kinematics import unwrap_euler as unwrap_euler
 from ._matrix import matrix_to_quaternion as matrix_to_quaternion
+from ._mrp import mrp_to_quaternion as mrp_to_quaternion
+from ._mrp import quaternion_to_mrp as quaternion_to_mrp
 from ._quaternion import angle_between as angle_between
 from ._quaternion import quaternion_apply as quaternion_apply
 from ._quaternion import quaternion_conjugate as quaternion_conjugate
@@ -38,6 +46,8 @@ from ._quaternion import quaternion_normalize as quaternion_normalize
 from ._quaternion import quaternion_to_matrix as quaternion_to_matrix
 from ._quaternion import relative_rotation as relative_rotation
 from ._quaternion import rotation_angle as rotation_angle
+from ._rotation import Rotation as Rotation
+from ._rotation import Slerp as Slerp
 from ._rotvec import axis_angle_to_quaternion as axis_angle_to_quaternion
 from ._rotvec import matrix_to_rotvec as matrix_to_rotvec
 from ._rotvec import quaternion_to_axis_angle as quaternion_to_axis_angle
