@@ -214,8 +214,14 @@ def quaternion_reduce(q, left=None, right=None, scalar_first: bool = False):
     lg, rg = groups
     L, M = lg.shape[0], rg.shape[0]
     # All products l_i * q * r_j, shape (..., L, M, 4).
-    qr = _multiply(q[..., None, :], rg)  # (..., M, 4)
-    prod = _multiply(lg[:, None, :], qr[..., None, :, :])  # (..., L, M, 4)
+    batch = q.shape[:-1]
+    qr = _multiply(  # (..., M, 4); broadcasting made explicit (no rank promotion)
+        jnp.broadcast_to(q[..., None, :], batch + (M, 4)), jnp.broadcast_to(rg, batch + (M, 4))
+    )
+    prod = _multiply(  # (..., L, M, 4)
+        jnp.broadcast_to(lg[:, None, :], batch + (L, M, 4)),
+        jnp.broadcast_to(qr[..., None, :, :], batch + (L, M, 4)),
+    )
     flat = jnp.reshape(prod, prod.shape[:-3] + (L * M, 4))
     best = jnp.argmax(jnp.abs(flat[..., 3]), axis=-1)
     out = jnp.take_along_axis(flat, best[..., None, None], axis=-2)[..., 0, :]

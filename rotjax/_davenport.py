@@ -59,6 +59,10 @@ def davenport_to_quaternion(
     if degrees:
         angles = jnp.deg2rad(angles)
     unit = axes / jnp.sqrt(jnp.sum(axes * axes, axis=-1, keepdims=True))
+    # Explicit broadcasting of the batch shapes (no implicit rank promotion).
+    batch = jnp.broadcast_shapes(unit.shape[:-2], angles.shape[:-1])
+    unit = jnp.broadcast_to(unit, batch + unit.shape[-2:])
+    angles = jnp.broadcast_to(angles, batch + angles.shape[-1:])
     q = None
     for i in range(k):
         qi = _rotvec_to_quat(angles[..., i, None] * unit[..., i, :])

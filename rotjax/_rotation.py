@@ -197,8 +197,7 @@ class Rotation:
     def __iter__(self):
         if self.single:
             raise TypeError("Single rotation is not iterable.")
-        for i in range(self._quat.shape[0]):
-            yield Rotation._raw(self._quat[i])
+        return (Rotation._raw(self._quat[i]) for i in range(self._quat.shape[0]))
 
     def _index(self, indexer):
         if self.single:
@@ -717,14 +716,15 @@ def _align(a, b, w):
     vec = jnp.where(anti, cross(ap, e), cross(bp, ap))
     q_pri = quaternion_normalize(jnp.concatenate([vec, jnp.where(anti, 0.0, c)[None]]))
     # The rotation about a_p that best aligns the secondary pairs (scipy's 2-D problem).
-    cs = quaternion_apply(q_pri, b)
-    sin = jnp.sum(cross(cs, a) * ap, axis=-1)
-    cos = jnp.sum(cs * a, axis=-1) - jnp.sum(cs * ap, axis=-1) * jnp.sum(a * ap, axis=-1)
+    cs = quaternion_apply(jnp.broadcast_to(q_pri, (n, 4)), b)
+    apn = ap[None, :]
+    sin = jnp.sum(cross(cs, a) * apn, axis=-1)
+    cos = jnp.sum(cs * a, axis=-1) - jnp.sum(cs * apn, axis=-1) * jnp.sum(a * apn, axis=-1)
     phi = safe_atan2(jnp.sum(w_fin * sin), jnp.sum(w_fin * cos))
     q_fix = quaternion_multiply(rotvec_to_quaternion(phi * ap), q_pri)
     q = jnp.where(jnp.any(inf), q_fix, q_svd)
     q = jnp.where(bad, jnp.nan, q)
-    d = a - quaternion_apply(q, b)
+    d = a - quaternion_apply(jnp.broadcast_to(q, (n, 4)), b)
     # A single finite-weight pair keeps its weight in the residual (scipy's rule).
     w_res = w if n == 1 else w_fin
     w_res = jnp.where(jnp.isinf(w_res), 0.0, w_res)
