@@ -6,6 +6,7 @@ from ._algebra import quaternion_reduce as quaternion_reduce
 from ._algebra import rotation_group as rotation_group
 from ._algebra import wahba_sensitivity as wahba_sensitivity
 from ._davenport import davenport_to_quaternion as davenport_to_quaternion
+from ._davenport import quaternion_to_davenport as quaternion_to_davenport
 from ._euler import euler_to_matrix as euler_to_matrix
 from ._euler import euler_to_quaternion as euler_to_quaternion
 from ._euler import matrix_to_euler as matrix_to_euler
@@ -47,6 +48,7 @@ from ._quaternion import quaternion_to_matrix as quaternion_to_matrix
 from ._quaternion import relative_rotation as relative_rotation
 from ._quaternion import rotation_angle as rotation_angle
 from ._rotation import Rotation as Rotation
+from ._rotation import RotationSpline as RotationSpline
 from ._rotation import Slerp as Slerp
 from ._rotvec import axis_angle_to_quaternion as axis_angle_to_quaternion
 from ._rotvec import matrix_to_rotvec as matrix_to_rotvec

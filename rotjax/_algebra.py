@@ -131,24 +131,29 @@ def _polyhedral(name: str) -> np.ndarray:
     return np.concatenate([tetra, _signed_permutations((phi / 2, 0.5, 0.5 / phi, 0.0), True)])  # 60
 
 
-@functools.cache
 def _group(group: str, axis: str) -> np.ndarray:
-    if not isinstance(group, str) or not group:
-        raise ValueError(f"group must be a string such as 'C3', 'D4', 'T', 'O', 'I'; got {group!r}")
-    if axis not in _GROUP_AXES:
-        raise ValueError(f"axis must be one of 'X', 'Y', 'Z', got {axis!r}")
-    kind, order = group[0].upper(), group[1:]
+    if not isinstance(group, str):
+        raise ValueError(f"`group` argument must be a string, got {group!r}")
+    if not isinstance(axis, str) or axis not in _GROUP_AXES:
+        raise ValueError(f"`axis` must be one of 'X', 'Y', 'Z', got {axis!r}")
+    return _group_cached(group, axis)
+
+
+@functools.cache
+def _group_cached(group: str, axis: str) -> np.ndarray:
+    names = "`group` must be one of 'I', 'O', 'T', 'Dn', 'Cn'"
+    kind, order = group[:1].upper(), group[1:]
     if kind in "CD" and len(group) > 1:
-        if not order.isdigit() or int(order) < 1:
-            raise ValueError(f"group order must be a positive integer, got {group!r}")
+        if not order.isdigit():
+            raise ValueError(f"{names} (n a positive integer), got {group!r}")
+        if int(order) < 1:
+            raise ValueError(f"Group order must be positive, got {group!r}")
         n = int(order)
         q = _cyclic(n, _GROUP_AXES[axis]) if kind == "C" else _dihedral(n, _GROUP_AXES[axis])
     elif group.upper() in ("T", "O", "I"):
         q = _polyhedral(group.upper())
     else:
-        raise ValueError(
-            f"group must be 'I', 'O', 'T', 'Dn' or 'Cn' (n a positive integer), got {group!r}"
-        )
+        raise ValueError(f"{names} (n a positive integer), got {group!r}")
     return q
 
 

@@ -6,6 +6,7 @@ bookkeeping and method names; every computation is one of rotjax's functions.
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import jax
@@ -19,13 +20,14 @@ from ._algebra import (
     rotation_group,
     wahba_sensitivity,
 )
-from ._davenport import davenport_to_quaternion, parse_order
+from ._davenport import davenport_to_quaternion, parse_order, quaternion_to_davenport
 from ._euler import euler_to_quaternion, parse_seq, quaternion_to_euler
 from ._fitting import align_vectors as _align_vectors
 from ._fitting import quaternion_mean
+from ._kinematics import quaternion_derivative_to_angular_velocity
 from ._matrix import matrix_to_quaternion
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
-from ._numerics import cross, eps, safe_atan2, to_scalar_last
+from ._numerics import cross, eps, matvec, safe_atan2, to_scalar_last
 from ._quaternion import (
     angle_between,
     quaternion_apply,
@@ -60,7 +62,7 @@ def _concrete(x) -> np.ndarray | None:
         return None
 
 
-def _broadcast(*arrays, trailing):
+def _broadcast(*arrays, trailing, what="Cannot broadcast the batch shapes"):
     """Broadcast the leading (batch) shapes explicitly, so that rank promotion is never
     implicit; ``trailing`` gives each array's core rank."""
     try:
@@ -71,7 +73,7 @@ def _broadcast(*arrays, trailing):
         shapes = ", ".join(
             str(a.shape[: a.ndim - t]) for a, t in zip(arrays, trailing, strict=True)
         )
-        raise ValueError(f"Cannot broadcast the batch shapes {shapes}") from None
+        raise ValueError(f"{what} {shapes}") from None
     return tuple(
         jnp.broadcast_to(a, shape + a.shape[a.ndim - t :])
         for a, t in zip(arrays, trailing, strict=True)
@@ -382,7 +384,7 @@ class Rotation:
         return Rotation._raw(_identity_quat(shape, dtype if dtype is not None else float))
 
     @staticmethod
-    def random(num=None, rng=None, *, shape=None) -> Rotation:
+    def random(num=None, rng=None, *, shape=None, random_state=None) -> Rotation:
         """Uniformly distributed random rotations.
 
         Args:
@@ -391,11 +393,18 @@ class Rotation:
             rng: a ``numpy.random.Generator``, a seed for ``numpy.random.default_rng``, or a
                 JAX PRNG key. With NumPy, the samples equal scipy's for the same generator.
             shape: batch shape, instead of ``num``.
+            random_state: scipy's former name of ``rng``.
         """
+        if rng is None:
+            rng = random_state
         if _is_key(num):
             num, rng = rng, num
         if num is not None and shape is not None:
             raise ValueError("Only one of `num` or `shape` can be specified.")
+        if shape is not None and not (
+            isinstance(shape, int) or all(isinstance(s, int) for s in np.atleast_1d(shape))
+        ):
+            raise ValueError("`shape` must be an int or a tuple of ints")
         size = (
             (num,)
             if num is not None
@@ -537,29 +546,35 @@ class Rotation:
     def as_davenport(self, axes, order: str, degrees: bool = False, *, suppress_warnings=False):
         """Davenport angles about three axes, consecutive ones orthogonal, ``(..., 3)``.
 
-        Supported where the axes are coordinate axes (signs allowed), through
-        :func:`quaternion_to_euler`; other axes raise ``NotImplementedError``.
+        Args:
+            axes: ``(..., 3, 3)`` the axes as rows; batch shape broadcasts with ``shape``.
+            order: ``"e"``/``"extrinsic"`` or ``"i"``/``"intrinsic"``.
+            degrees: return degrees.
+            suppress_warnings: accepted for scipy compatibility (no gimbal-lock warning).
+
+        Returns:
+            Angles in scipy's ranges (see :func:`quaternion_to_davenport`).
         """
         del suppress_warnings
         extrinsic = parse_order(order)
-        ax = np.asarray(axes, dtype=float)
-        if ax.ndim != 2 or ax.shape[-2] != 3:
+        ax = _float(axes, self._quat.dtype)
+        if ax.ndim < 2 or ax.shape[-2] != 3:
             raise ValueError(f"Expected 3 axes, got {ax.shape}.")
         if ax.shape[-1] != 3:
             raise ValueError("Axes must be vectors of length 3.")
-        ax = ax / np.linalg.norm(ax, axis=-1, keepdims=True)
-        if np.any(np.abs(np.sum(ax[:-1] * ax[1:], axis=-1)) >= 1e-7):
-            raise ValueError("Consecutive axes must be orthogonal.")
-        idx = np.argmax(np.abs(ax), axis=-1)
-        if not np.allclose(np.abs(ax[np.arange(3), idx]), 1.0, rtol=0, atol=1e-12):
-            raise NotImplementedError("as_davenport: only coordinate axes are supported")
-        sign = np.sign(ax[np.arange(3), idx])
-        seq = "".join(("xyz" if extrinsic else "XYZ")[i] for i in idx)
-        ang = quaternion_to_euler(self._quat, seq, degrees=degrees)
-        if np.all(sign > 0):
-            return ang
-        # A negated axis negates its angle; ranges as for the positive axis.
-        return ang * jnp.asarray(sign, ang.dtype)
+        try:
+            np.broadcast_shapes(ax.shape[:-2], self.shape)
+        except ValueError:
+            raise ValueError(
+                f"Expected `axes` to match number of rotations, got {ax.shape} axes and "
+                f"{self._quat.shape} rotations."
+            ) from None
+        host = _concrete(axes)
+        if host is not None:
+            h = host / np.linalg.norm(host, axis=-1, keepdims=True)
+            if np.any(np.abs(np.sum(h[..., :-1, :] * h[..., 1:, :], axis=-1)) > 1e-7):
+                raise ValueError("Consecutive axes must be orthogonal.")
+        return quaternion_to_davenport(self._quat, ax, extrinsic=extrinsic, degrees=degrees)
 
     # --- algebra -------------------------------------------------------------------------
 
@@ -573,17 +588,12 @@ class Rotation:
     def __pow__(self, n, modulus=None) -> Rotation:
         """Fractional power: ``n`` times the rotation angle about the same axis.
 
-        ``n`` is a scalar (an array of shape ``()`` or ``(1,)``). ``n`` = 1, 0, -1 given as
-        Python numbers return the rotation itself, the identity, the inverse exactly.
+        ``n`` is a scalar (an array of shape ``()`` or ``(1,)``); see :func:`quaternion_power`.
+        ``r ** 1`` is ``r`` up to the quaternion's sign (``w >= 0``), ``r ** 0`` the identity
+        exactly.
         """
         if modulus is not None:
             raise NotImplementedError("modulus not supported")
-        if isinstance(n, (int, float)) and n in (0, 1, -1):
-            if n == 1:
-                return Rotation._raw(self._quat)
-            if n == -1:
-                return self.inv()
-            return Rotation._raw(_identity_quat(self.shape, self._quat.dtype))
         e = jnp.asarray(n)
         if e.shape == (1,):
             e = e[0]
@@ -629,7 +639,9 @@ class Rotation:
             atol = 1e-8
         elif degrees:
             atol = np.deg2rad(atol)
-        p, q = _broadcast(self._quat, other._quat, trailing=(1, 1))
+        p, q = _broadcast(
+            self._quat, other._quat, trailing=(1, 1), what="Expected broadcastable shapes, got"
+        )
         return angle_between(p, q) < atol
 
     def mean(self, weights=None, axis=None) -> Rotation:
@@ -731,6 +743,7 @@ def _align(a, b, w):
     ss = jnp.sum(w_res * jnp.sum(d * d, axis=-1))
     pos = ss > 0
     rssd = jnp.where(pos, jnp.sqrt(jnp.where(pos, ss, 1.0)), 0.0)  # cone at 0: gradient 0 there
+    rssd = jnp.where(jnp.isnan(ss), jnp.nan, rssd)
     return q, rssd
 
 
@@ -752,6 +765,8 @@ class Slerp:
     def __init__(self, times, rotations: Rotation):
         if not isinstance(rotations, Rotation):
             raise TypeError("`rotations` must be a `Rotation` instance.")
+        if rotations._quat.ndim > 2:
+            raise ValueError("Rotations with more than 1 leading dimension are not supported.")
         if rotations.single or len(rotations) == 1:
             raise ValueError("`rotations` must be a sequence of at least 2 rotations.")
         t = _float(times, rotations._quat.dtype)
@@ -791,6 +806,8 @@ class Slerp:
         batch shape). Times outside ``[times[0], times[-1]]`` give NaN (ValueError for NumPy
         input)."""
         t = _float(times, self.times.dtype)
+        if t.ndim > 1:
+            raise ValueError("`times` must be at most 1-dimensional.")
         host = _concrete(times)
         if (
             host is not None
@@ -817,3 +834,166 @@ def _slerp_eval(times, timedelta, quat, rotvecs, t):
     alpha = jnp.where((t < times[0]) | (t > times[-1]), jnp.nan, alpha)
     step = rotvec_to_quaternion(alpha[..., None] * rotvecs[idx])
     return quaternion_multiply(quat[idx], step)
+
+
+# --- RotationSpline ----------------------------------------------------------------------
+#
+# On segment i (times t_i .. t_i+1, length h_i) the rotation is R_i exp(phi(tau)) with the
+# cubic rotation vector phi(tau) = c3 tau^3 + c2 tau^2 + w_i tau, phi(h_i) = r_i (the relative
+# rotation vector to R_i+1) and phi'(h_i) = A(r_i) w_i+1, where w_k is the body angular rate at
+# knot k and A(r) maps body rates to rotation-vector rates (its inverse, B(r), is the Jacobian
+# of the body rate of exp(r)). Continuity of the angular acceleration at the interior knots,
+#   2/h_i B(r_i) w_i + 4 (1/h_i + 1/h_i+1) w_i+1 + 2/h_i+1 A(r_i+1) w_i+2
+#       = 6 (r_i / h_i^2 + r_i+1 / h_i+1^2) - N(r_i, A(r_i) w_i+1),
+# with N the part of the angular acceleration quadratic in phi', is solved by fixed-point
+# iteration on N (scipy's RotationSpline; end rates w_0 = r_0 / h_0 and w_n = r_n-1 / h_n-1).
+# B and N come from differentiating rotvec_to_quaternion and the body angular velocity.
+
+
+def _body_rate(phi, phi_dot):
+    """Body angular velocity of ``exp(phi)`` moving at ``phi_dot``."""
+    q, dq = jax.jvp(rotvec_to_quaternion, (phi,), (phi_dot,))
+    return quaternion_derivative_to_angular_velocity(q, dq, frame="body")
+
+
+def _rate_jacobian(phi):
+    """``B(phi)``: ``body_rate = B(phi) @ phi_dot``; ``(3,)`` to ``(3, 3)``."""
+    return jax.jacfwd(lambda v: _body_rate(phi, v))(jnp.zeros_like(phi))
+
+
+def _quadratic_term(phi, phi_dot):
+    """``N(phi, phi_dot)``: the angular acceleration's term quadratic in ``phi_dot``."""
+    return jax.jvp(lambda p: _body_rate(p, phi_dot), (phi,), (phi_dot,))[1]
+
+
+_SPLINE_ITERATIONS = 10
+
+
+@jax.jit
+def _spline_coefficients(times, quat):
+    h = jnp.diff(times)
+    r = quaternion_to_rotvec(quaternion_multiply(quaternion_conjugate(quat[:-1]), quat[1:]))
+    n = r.shape[0]  # segments
+    w_first, w_last = r[0] / h[0], r[-1] / h[-1]
+    B = jax.vmap(_rate_jacobian)(r)
+    A = jnp.linalg.inv(B)
+    if n == 1:
+        w = jnp.stack([w_first, w_last])
+    else:
+        m = n - 1  # interior knots
+        eye = jnp.eye(3, dtype=r.dtype)
+        M = jnp.zeros((m, 3, m, 3), r.dtype)
+        k = jnp.arange(m)
+        M = M.at[k, :, k, :].set((4 * (1 / h[:-1] + 1 / h[1:]))[:, None, None] * eye)
+        if m > 1:
+            M = M.at[k[1:], :, k[:-1], :].set(2 / h[1:-1, None, None] * B[1:-1])
+            M = M.at[k[:-1], :, k[1:], :].set(2 / h[1:-1, None, None] * A[1:-1])
+        M = M.reshape(3 * m, 3 * m)
+        b0 = 6 * (r[:-1] / h[:-1, None] ** 2 + r[1:] / h[1:, None] ** 2)
+        b0 = b0.at[0].add(-2 / h[0] * matvec(B[0], w_first))
+        b0 = b0.at[-1].add(-2 / h[-1] * matvec(A[-1], w_last))
+        w_int = jnp.broadcast_to(r[:-1] / h[:-1, None], (m, 3))  # start: the chord rates
+
+        def step(_, w_int):
+            w_end = jnp.concatenate([w_int, w_last[None]])
+            rdot = matvec(A, w_end)
+            rhs = b0 - jax.vmap(_quadratic_term)(r[:-1], rdot[:-1])
+            return jnp.linalg.solve(M, rhs.reshape(-1)).reshape(m, 3)
+
+        w_int = jax.lax.fori_loop(0, _SPLINE_ITERATIONS, step, w_int)
+        w = jnp.concatenate([w_first[None], w_int, w_last[None]])
+    rdot = matvec(A, w[1:])
+    hh = h[:, None]
+    c3 = (-2 * r + hh * w[:-1] + hh * rdot) / hh**3
+    c2 = (3 * r - 2 * hh * w[:-1] - hh * rdot) / hh**2
+    return c3, c2, w[:-1]
+
+
+@jax.tree_util.register_pytree_node_class
+class RotationSpline:
+    """Cubic rotation spline with continuous angular rate and acceleration (scipy's).
+
+    Interpolates keyframe rotations by a cubic in the rotation vector relative to each
+    keyframe, with the angular rates at the knots chosen to make the angular acceleration
+    continuous (Sec. 4 of the scipy reference; the end rates are those of the end chords).
+    Construction and evaluation are jittable (a fixed number of fixed-point iterations and a
+    dense linear solve of size ``3 (N - 2)``). A pytree.
+
+    Args:
+        times: ``(N,)`` strictly increasing times, ``N >= 2``.
+        rotations: a ``Rotation`` of shape ``(N,)``.
+    """
+
+    __slots__ = ("times", "rotations", "_coeffs")
+
+    def __init__(self, times, rotations: Rotation):
+        if not isinstance(rotations, Rotation) or rotations.single:
+            raise ValueError("`rotations` must be a sequence of rotations.")
+        if rotations._quat.ndim > 2:
+            raise ValueError("Rotations with more than 1 leading dimension are not supported.")
+        if len(rotations) == 1:
+            raise ValueError("`rotations` must contain at least 2 rotations.")
+        t = _float(times, rotations._quat.dtype)
+        if t.ndim != 1:
+            raise ValueError("`times` must be 1-dimensional.")
+        if t.shape[0] != len(rotations):
+            raise ValueError(
+                "Expected number of rotations to be equal to number of timestamps given, "
+                f"got {len(rotations)} rotations and {t.shape[0]} timestamps."
+            )
+        host = _concrete(times)
+        if host is not None and np.any(np.diff(host) <= 0):
+            raise ValueError("Values in `times` must be in a strictly increasing order.")
+        self.times = t
+        self.rotations = rotations
+        self._coeffs = _spline_coefficients(t, rotations._quat)
+
+    def tree_flatten(self):
+        return (self.times, self.rotations, self._coeffs), None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        s = object.__new__(cls)
+        s.times, s.rotations, s._coeffs = children
+        return s
+
+    def __call__(self, times, order: int = 0):
+        """Rotations (``order=0``), angular rates (1, rad/s) or angular accelerations (2).
+
+        Args:
+            times: scalar or ``(M,)`` times; outside the knots the end cubics extrapolate.
+            order: 0, 1 or 2.
+
+        Returns:
+            A ``Rotation``, or ``(..., 3)`` rates/accelerations: the angular velocity of
+            ``R(t)`` expressed in the frame of the keyframe ``R_i`` that starts the segment
+            (scipy's convention), and its time derivative.
+        """
+        if order not in (0, 1, 2):
+            raise ValueError("`order` must be 0, 1 or 2.")
+        t = _float(times, self.times.dtype)
+        if t.ndim > 1:
+            raise ValueError("`times` must be at most 1-dimensional.")
+        out = _spline_eval(self.times, self.rotations._quat, self._coeffs, t, order)
+        return Rotation._raw(out) if order == 0 else out
+
+
+@functools.partial(jax.jit, static_argnames="order")
+def _spline_eval(times, quat, coeffs, t, order):
+    c3, c2, c1 = coeffs
+    idx = jnp.clip(jnp.searchsorted(times, t, side="right") - 1, 0, times.shape[0] - 2)
+
+    def phi(tau):
+        return ((c3[idx] * tau[..., None] + c2[idx]) * tau[..., None] + c1[idx]) * tau[..., None]
+
+    tau = t - times[idx]
+    if order == 0:
+        return quaternion_multiply(quat[idx], rotvec_to_quaternion(phi(tau)))
+
+    def rate(tau):
+        p, pdot = jax.jvp(phi, (tau,), (jnp.ones_like(tau),))
+        return _body_rate(p, pdot)
+
+    if order == 1:
+        return rate(tau)
+    return jax.jvp(rate, (tau,), (jnp.ones_like(tau),))[1]
