@@ -402,7 +402,8 @@ class Rotation:
         if num is not None and shape is not None:
             raise ValueError("Only one of `num` or `shape` can be specified.")
         if shape is not None and not (
-            isinstance(shape, int) or all(isinstance(s, int) for s in np.atleast_1d(shape))
+            isinstance(shape, int)
+            or all(isinstance(s, (int, np.integer)) for s in np.atleast_1d(shape))
         ):
             raise ValueError("`shape` must be an int or a tuple of ints")
         size = (

@@ -289,3 +289,77 @@ def test_jax_scipy_snippet_runs_unchanged():
 
     for a, b in zip(script(Rotation, Slerp), script(jst.Rotation, jst.Slerp), strict=True):
         np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+# --- the new functions and RotationSpline -------------------------------------------------
+
+
+def test_as_davenport_oblique_axes_match_scipy():
+    axes = np.array([[1.0, 0, 0], [0, 1, 0], [np.cos(2.0), 0, np.sin(2.0)]])
+    rot = SR.from_quat(Q)
+    for order in ("e", "i"):
+        np.testing.assert_allclose(
+            Rotation.from_quat(Q).as_davenport(axes, order),
+            rot.as_davenport(axes, order),
+            atol=1e-13,
+        )
+
+
+def test_rotation_spline_matches_scipy():
+    from scipy.spatial.transform import RotationSpline as SSpline
+
+    t = np.array([0.0, 1.0, 2.5, 3.0, 5.0, 6.0])
+    ti = np.linspace(-0.5, 6.5, 15)
+    mine, ref = rotjax.RotationSpline(t, Rotation.from_quat(Q)), SSpline(t, SR.from_quat(Q))
+    same_rotation(mine(ti).as_quat(), ref(ti).as_quat(), 1e-12)
+    np.testing.assert_allclose(mine(ti, 1), ref(ti, 1), atol=1e-12)
+    np.testing.assert_allclose(mine(ti, 2), ref(ti, 2), atol=1e-11)
+    two = rotjax.RotationSpline(t[:2], Rotation.from_quat(Q[:2]))
+    same_rotation(two(ti).as_quat(), SSpline(t[:2], SR.from_quat(Q[:2]))(ti).as_quat(), 1e-12)
+
+
+SINGULAR_QUATS = {
+    "identity": [0.0, 0.0, 0.0, 1.0],
+    "half_turn": [0.0, 0.6, 0.8, 0.0],
+    "generic": [0.1, -0.3, 0.2, 0.9],
+}
+
+
+@pytest.mark.parametrize("name", sorted(SINGULAR_QUATS))
+def test_new_functions_gradients_finite_and_true(name):
+    q = jnp.asarray(SINGULAR_QUATS[name])
+    dq = jnp.asarray([0.3, -0.2, 0.5, 0.1])
+    h = 1e-6
+
+    def check(f, x, dx, side=None):
+        _, jvp = jax.jvp(f, (x,), (dx,))
+        assert np.all(np.isfinite(jvp))
+        # one-sided at the 180-degree cut (the side that keeps w >= 0), central elsewhere
+        fd = (f(x + h * dx) - f(x)) / h if side else (f(x + h * dx) - f(x - h * dx)) / (2 * h)
+        np.testing.assert_allclose(jvp, fd, atol=1e-6)
+
+    side = name == "half_turn"
+    check(rotjax.quaternion_to_mrp, q, dq, side)
+    check(lambda n: rotjax.quaternion_power(q, n), jnp.asarray(1.0), jnp.asarray(1.0), side)
+    check(lambda x: rotjax.quaternion_power(x, jnp.asarray(0.4)), q, dq, side)
+    check(rotjax.mrp_to_quaternion, q[:3], dq[:3])
+
+
+def test_new_functions_round_trips():
+    q = jnp.asarray(Q)
+    same_rotation(
+        rotjax.mrp_to_quaternion(rotjax.quaternion_to_mrp(q)),
+        q / np.linalg.norm(Q, axis=-1, keepdims=True),
+        1e-15,
+    )
+    c = rotjax.quaternion_canonical(
+        jnp.asarray([[0.0, -1.0, 0, 0], [0, 0, 0, -1.0], [1, 0, 0, -2]])
+    )
+    np.testing.assert_array_equal(c, [[0, 1, 0, 0], [0, 0, 0, 1], [-1, 0, 0, 2]])
+    axes = np.array([[0.0, 0, 2], [1, 0, 0], [0, 0, 1]])
+    ang = rotjax.quaternion_to_davenport(q, axes, extrinsic=True)
+    same_rotation(
+        rotjax.davenport_to_quaternion(axes, ang, extrinsic=True),
+        q / np.linalg.norm(Q, axis=-1, keepdims=True),
+        1e-14,
+    )
