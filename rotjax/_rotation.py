@@ -88,9 +88,23 @@ def _from_matrix_checked(matrix):
     return jnp.where((det > 0)[..., None], q, jnp.nan)
 
 
+@functools.partial(jax.jit, static_argnames=("normalize", "scalar_first"))
+def _prepare_quat(q, normalize, scalar_first):
+    q = to_scalar_last(_float(q), scalar_first)
+    return quaternion_normalize(q) if normalize else q
+
+
 @jax.jit
 def _compose(p, q):
+    p, q = _broadcast(p, q, trailing=(1, 1))
     return quaternion_normalize(quaternion_multiply(p, q))
+
+
+@functools.partial(jax.jit, static_argnames="inverse")
+def _apply(q, v, inverse):
+    if inverse:
+        q = quaternion_conjugate(q)
+    return quaternion_apply(*_broadcast(q, v, trailing=(1, 1)))
 
 
 def _identity_quat(shape, dtype):
@@ -139,14 +153,13 @@ class Rotation:
     def __init__(self, quat, normalize: bool = True, copy: bool = True, scalar_first: bool = False):
         del copy  # JAX arrays are immutable: there is nothing to copy
         host = _concrete(quat)
-        q = _float(quat)
+        # Host input goes to the jitted function as it is: one dispatch, no separate transfer.
+        q = host if host is not None else _float(quat)
         if q.ndim < 1 or q.shape[-1] != 4:
             raise ValueError(f"Expected `quat` to have shape (..., 4), got {q.shape}.")
         if host is not None and normalize and np.any(np.sum(host * host, axis=-1) == 0):
             raise ValueError("Found zero norm quaternions in `quat`.")
-        if scalar_first:
-            q = to_scalar_last(q, True)
-        self._quat = quaternion_normalize(q) if normalize else q
+        self._quat = _prepare_quat(q, normalize=normalize, scalar_first=scalar_first)
 
     # --- pytree -------------------------------------------------------------------------
 
@@ -583,8 +596,16 @@ class Rotation:
         """Composition ``self * other``: ``other`` applied first; batch shapes broadcast."""
         if not isinstance(other, Rotation):
             return NotImplemented
-        p, q = _broadcast(self._quat, other._quat, trailing=(1, 1))
-        return Rotation._raw(_compose(p, q))
+        # The shapes are checked here, so that the error is scipy's ValueError.
+        np_shapes = (self.shape, other.shape)
+        try:
+            np.broadcast_shapes(*np_shapes)
+        except ValueError:
+            raise ValueError(
+                f"Cannot broadcast {np_shapes[0]} rotations in first to {np_shapes[1]} "
+                "rotations in second object."
+            ) from None
+        return Rotation._raw(_compose(self._quat, other._quat))
 
     def __pow__(self, n, modulus=None) -> Rotation:
         """Fractional power: ``n`` times the rotation angle about the same axis.
@@ -617,13 +638,17 @@ class Rotation:
         Returns:
             ``(..., 3)`` rotated vectors, in the rotation's dtype.
         """
-        v = _float(vectors, self._quat.dtype)
+        host = _concrete(vectors)
+        v = host.astype(self._quat.dtype) if host is not None else _float(vectors, self._quat.dtype)
         if v.ndim < 1 or v.shape[-1] != 3:
             raise ValueError(f"Expected input of shape (..., 3), got {v.shape}.")
-        q = quaternion_conjugate(self._quat) if inverse else self._quat
-        if q.ndim != v.ndim + 1 or q.shape[:-1] != v.shape[:-1]:
-            q, v = _broadcast(q, v, trailing=(1, 1))
-        return quaternion_apply(q, v)
+        try:
+            np.broadcast_shapes(self.shape, v.shape[:-1])
+        except ValueError:
+            raise ValueError(
+                f"Cannot broadcast {self.shape} rotations to {v.shape[:-1]} vectors."
+            ) from None
+        return _apply(self._quat, v, inverse=inverse)
 
     def magnitude(self):
         """Rotation angles in ``[0, pi]``, shape ``shape``."""
@@ -641,7 +666,10 @@ class Rotation:
         elif degrees:
             atol = np.deg2rad(atol)
         p, q = _broadcast(
-            self._quat, other._quat, trailing=(1, 1), what="Expected broadcastable shapes, got"
+            self._quat,
+            other._quat,
+            trailing=(1, 1),
+            what="Expected broadcastable shapes in both rotations, got",
         )
         return angle_between(p, q) < atol
 
@@ -748,6 +776,24 @@ def _align(a, b, w):
     return q, rssd
 
 
+def _keyframe_times(times, rotations, dim_msg, order_msg):
+    """Keyframe times as a 1-D array matching ``rotations`` (scipy's checks and messages)."""
+    if rotations._quat.ndim > 2:
+        raise ValueError("Rotations with more than 1 leading dimension are not supported.")
+    t = _float(times, rotations._quat.dtype)
+    if t.ndim != 1:
+        raise ValueError(dim_msg)
+    if t.shape[0] != len(rotations):
+        raise ValueError(
+            "Expected number of rotations to be equal to number of timestamps given, got "
+            f"{len(rotations)} rotations and {t.shape[0]} timestamps."
+        )
+    host = _concrete(times)
+    if host is not None and np.any(np.diff(host) <= 0):
+        raise ValueError(order_msg)
+    return t
+
+
 @jax.tree_util.register_pytree_node_class
 class Slerp:
     """Spherical linear interpolation between keyframe rotations (scipy's and jax.scipy's).
@@ -766,23 +812,15 @@ class Slerp:
     def __init__(self, times, rotations: Rotation):
         if not isinstance(rotations, Rotation):
             raise TypeError("`rotations` must be a `Rotation` instance.")
-        if rotations._quat.ndim > 2:
-            raise ValueError("Rotations with more than 1 leading dimension are not supported.")
         if rotations.single or len(rotations) == 1:
             raise ValueError("`rotations` must be a sequence of at least 2 rotations.")
-        t = _float(times, rotations._quat.dtype)
-        if t.ndim != 1:
-            raise ValueError(
-                f"Expected times to be specified in a 1 dimensional array, got {t.ndim} dimensions."
-            )
-        if t.shape[0] != len(rotations):
-            raise ValueError(
-                "Expected number of rotations to be equal to number of timestamps given, got "
-                f"{len(rotations)} rotations and {t.shape[0]} timestamps."
-            )
-        host = _concrete(times)
-        if host is not None and np.any(np.diff(host) <= 0):
-            raise ValueError("Times must be in strictly increasing order.")
+        t = _keyframe_times(
+            times,
+            rotations,
+            f"Expected times to be specified in a 1 dimensional array, got {jnp.ndim(times)} "
+            "dimensions.",
+            "Times must be in strictly increasing order.",
+        )
         self.times = t
         self.timedelta = jnp.diff(t)
         self.rotations = rotations
@@ -930,21 +968,14 @@ class RotationSpline:
     def __init__(self, times, rotations: Rotation):
         if not isinstance(rotations, Rotation) or rotations.single:
             raise ValueError("`rotations` must be a sequence of rotations.")
-        if rotations._quat.ndim > 2:
-            raise ValueError("Rotations with more than 1 leading dimension are not supported.")
         if len(rotations) == 1:
             raise ValueError("`rotations` must contain at least 2 rotations.")
-        t = _float(times, rotations._quat.dtype)
-        if t.ndim != 1:
-            raise ValueError("`times` must be 1-dimensional.")
-        if t.shape[0] != len(rotations):
-            raise ValueError(
-                "Expected number of rotations to be equal to number of timestamps given, "
-                f"got {len(rotations)} rotations and {t.shape[0]} timestamps."
-            )
-        host = _concrete(times)
-        if host is not None and np.any(np.diff(host) <= 0):
-            raise ValueError("Values in `times` must be in a strictly increasing order.")
+        t = _keyframe_times(
+            times,
+            rotations,
+            "`times` must be 1-dimensional.",
+            "Values in `times` must be in a strictly increasing order.",
+        )
         self.times = t
         self.rotations = rotations
         self._coeffs = _spline_coefficients(t, rotations._quat)
