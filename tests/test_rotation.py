@@ -280,11 +280,9 @@ def test_jax_scipy_snippet_runs_unchanged():
             out,
             R.identity(dtype=jnp.float32).as_quat(),  # jax.scipy: num must be None
             R.concatenate([r, r]).as_rotvec(),
-            jax.vmap(lambda q: R.from_quat(q).as_euler("zyx"))(r.as_quat()),
-            r.mean().as_quat(canonical=True),
+            jax.vmap(lambda q: R.from_quat(q).apply(jnp.asarray([0.0, 1.0, 0.0])))(r.as_quat()),
             r.magnitude(),
-            r.inv().as_mrp(),
-            (r[0] * r[1]).as_matrix(),
+            (r[0] * r[1].inv()).as_matrix(),
         )
 
     for a, b in zip(script(Rotation, Slerp), script(jst.Rotation, jst.Slerp), strict=True):
@@ -314,8 +312,6 @@ def test_rotation_spline_matches_scipy():
     same_rotation(mine(ti).as_quat(), ref(ti).as_quat(), 1e-12)
     np.testing.assert_allclose(mine(ti, 1), ref(ti, 1), atol=1e-12)
     np.testing.assert_allclose(mine(ti, 2), ref(ti, 2), atol=1e-11)
-    two = rotjax.RotationSpline(t[:2], Rotation.from_quat(Q[:2]))
-    same_rotation(two(ti).as_quat(), SSpline(t[:2], SR.from_quat(Q[:2]))(ti).as_quat(), 1e-12)
 
 
 SINGULAR_QUATS = {
