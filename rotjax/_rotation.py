@@ -817,7 +817,7 @@ class Slerp:
         t = _keyframe_times(
             times,
             rotations,
-            f"Expected times to be specified in a 1 dimensional array, got {jnp.ndim(times)} "
+            f"Expected times to be specified in a 1 dimensional array, got {np.ndim(times)} "
             "dimensions.",
             "Times must be in strictly increasing order.",
         )
