@@ -57,7 +57,8 @@ def _concrete(x) -> np.ndarray | None:
     if isinstance(x, (jax.Array, jax.core.Tracer)):
         return None
     try:
-        return np.asarray(x, dtype=float)
+        a = np.asarray(x)
+        return a if np.issubdtype(a.dtype, np.floating) else a.astype(float)
     except (TypeError, ValueError):
         return None
 

@@ -195,7 +195,7 @@ def test_jit_vmap_scan_grad_pickle():
 
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
 def test_dtype_preserved(dtype):
-    r = Rotation.from_quat(jnp.asarray(Q, dtype))
+    r = Rotation.from_quat(Q.astype(dtype))  # NumPy input keeps its float dtype too
     outs = [r.as_matrix(), r.as_euler("zyx"), r.apply(V), r.as_mrp(), (r * r).as_quat()]
     assert all(o.dtype == dtype for o in outs)
 
