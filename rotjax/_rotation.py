@@ -54,7 +54,7 @@ def _concrete(x) -> np.ndarray | None:
     Value checks that scipy makes (negative weights, zero norms) are made only on such inputs:
     they cost no device transfer, and under ``jit`` the values are never inspected.
     """
-    if isinstance(x, (jax.Array, jax.core.Tracer)):
+    if isinstance(x, jax.Array):  # tracers are jax.Array instances too
         return None
     try:
         a = np.asarray(x)
@@ -113,7 +113,7 @@ def _identity_quat(shape, dtype):
 
 
 def _is_key(x) -> bool:
-    if isinstance(x, (jax.Array, jax.core.Tracer)):
+    if isinstance(x, jax.Array):
         if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
             return True
         return x.dtype == jnp.uint32 and x.shape == (2,)
@@ -158,7 +158,7 @@ class Rotation:
         q = host if host is not None else _float(quat)
         if q.ndim < 1 or q.shape[-1] != 4:
             raise ValueError(f"Expected `quat` to have shape (..., 4), got {q.shape}.")
-        if host is not None and normalize and np.any(np.sum(host * host, axis=-1) == 0):
+        if host is not None and normalize and not host.any(axis=-1).all():
             raise ValueError("Found zero norm quaternions in `quat`.")
         self._quat = _prepare_quat(q, normalize=normalize, scalar_first=scalar_first)
 
