@@ -852,6 +852,7 @@ class Slerp:
         if (
             host is not None
             and host.size
+            and not isinstance(self.times, jax.core.Tracer)  # keyframes traced: not checked
             and (
                 np.any(host < np.asarray(self.times[0]))
                 or np.any(host > np.asarray(self.times[-1]))
