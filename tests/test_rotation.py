@@ -64,6 +64,7 @@ AS = {
     "mean": lambda r: r.mean().as_matrix(),
     "mean_weights": lambda r: r.mean(weights=np.arange(1.0, 7.0)).as_matrix(),
     "davenport": lambda r: r.as_davenport(np.eye(3)[[2, 0, 2]], "e"),
+    "mean_axis": lambda r: type(r).from_quat(r.as_quat().reshape(2, 3, 4)).mean(axis=1).as_matrix(),
 }
 
 
