@@ -360,3 +360,30 @@ def test_new_functions_round_trips():
         q / np.linalg.norm(Q, axis=-1, keepdims=True),
         1e-14,
     )
+
+
+def test_jit_class_compiles_to_the_functions_program():
+    # Under jit the class adds no work: the same operations, flops and bytes as the functions.
+    import re
+
+    def ops(f, *args):
+        c = f.lower(*args).compile()
+        ca = c.cost_analysis()
+        ca = ca[0] if isinstance(ca, list) else ca
+        text = re.sub(r", metadata=\{[^}]*\}", "", c.as_text())
+        found = sorted(re.findall(r"= \S+\[[^\]]*\][^ ]* (\w+)\(", text))
+        return found, ca.get("flops"), ca.get("bytes accessed")
+
+    q, v = jnp.asarray(Q), jnp.asarray(V)
+    cls = jax.jit(lambda q, v: (Rotation.from_quat(q) * Rotation.from_quat(q[::-1])).apply(v))
+    fun = jax.jit(
+        lambda q, v: rotjax.quaternion_apply(
+            rotjax.quaternion_normalize(
+                rotjax.quaternion_multiply(
+                    rotjax.quaternion_normalize(q), rotjax.quaternion_normalize(q[::-1])
+                )
+            ),
+            v,
+        )
+    )
+    assert ops(cls, q, v) == ops(fun, q, v)
