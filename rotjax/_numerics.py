@@ -13,6 +13,7 @@ Everything here is private. The helpers follow two rules that the public functio
 
 from __future__ import annotations
 
+import functools
 import inspect
 
 import jax
@@ -104,11 +105,36 @@ def as_float(*xs):
 
 
 def check_shape(x, trailing: tuple[int, ...], name: str) -> None:
-    """Raise ``ValueError`` at trace time unless ``x.shape`` ends with ``trailing``."""
+    """Raise ``ValueError`` at trace time unless ``x.shape`` ends with ``trailing``.
+
+    Inside a :func:`public` function it also checks that the leading (batch) shape of ``x``
+    broadcasts against those of the arguments checked before it, and otherwise raises a
+    ``ValueError`` naming both arguments and shapes (instead of a shape error from deep
+    inside JAX).
+
+    Args:
+        x: the array, after :func:`as_float`.
+        trailing: the shape its last axes must have, e.g. ``(3, 3)``; ``()`` checks only the
+            broadcasting of the batch shape.
+        name: the argument's name, for the message.
+    """
     n = len(trailing)
     if x.ndim < n or tuple(x.shape[x.ndim - n :]) != tuple(trailing):
         want = "(..., " + ", ".join(str(t) for t in trailing) + ")"
         raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
+    if not _BATCHES:
+        return
+    seen = _BATCHES[-1]
+    lead = tuple(x.shape[: x.ndim - n])
+    for other, other_lead, other_shape in seen:
+        try:
+            np.broadcast_shapes(lead, other_lead)
+        except ValueError:
+            raise ValueError(
+                f"leading (batch) shapes do not broadcast: {other} has {other_lead} "
+                f"(shape {other_shape}) and {name} has {lead} (shape {tuple(x.shape)})"
+            ) from None
+    seen.append((name, lead, tuple(x.shape)))
 
 
 def to_scalar_last(q, scalar_first: bool):
@@ -165,14 +191,52 @@ def vee(m):
 # Keyword arguments that select code paths: always static under jit.
 STATIC_ARGS = ("seq", "degrees", "scalar_first", "method", "frame", "axis")
 
+# One list per public call being traced (innermost last): the (name, leading shape, shape) of
+# each argument that :func:`check_shape` has seen, to check that batch shapes broadcast.
+_BATCHES: list[list[tuple[str, tuple[int, ...], tuple[int, ...]]]] = []
+
+
+def _check_static(name: str, value):
+    """Validate one configuration argument's type (its value is checked by the function that
+    reads it, which knows the valid choices) and return it in canonical form."""
+    if name in ("degrees", "scalar_first"):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name} must be a bool, got {type(value).__name__} {value!r}")
+        return bool(value)
+    if name == "axis":
+        # Any integer-like value (a NumPy integer included), but not a bool.
+        if isinstance(value, (bool, np.bool_)) or not hasattr(value, "__index__"):
+            raise TypeError(f"axis must be an int, got {type(value).__name__} {value!r}")
+        return int(value.__index__())
+    if not isinstance(value, str):  # seq, method, frame
+        raise TypeError(f"{name} must be a str, got {type(value).__name__} {value!r}")
+    return value
+
+
+def _check_array(name: str, value) -> None:
+    """Reject complex input, whose imaginary part would otherwise be dropped silently."""
+    if value is not None and jnp.iscomplexobj(value):
+        raise TypeError(f"{name} must be real (float or integer), got complex {value.dtype}")
+
 
 def public(fun):
     """Jit-wrap a public function, with the configuration arguments it takes made static.
 
     Parsing and validation of those arguments then happens once, in Python, at trace time:
-    errors are raised eagerly and cost nothing on later calls.
+    errors are raised eagerly and cost nothing on later calls. Before the function body runs,
+
+    * ``seq``, ``method`` and ``frame`` must be ``str``, ``degrees`` and ``scalar_first``
+      ``bool`` (or a NumPy bool) and ``axis`` an integer (a NumPy integer included); otherwise
+      ``TypeError``. Unknown values raise ``ValueError`` in the function, listing the valid
+      ones;
+    * complex arrays raise ``TypeError``;
+    * :func:`check_shape` also checks that the arguments' batch shapes broadcast.
+
+    A static argument that cannot be hashed (``seq`` as a list) fails in ``jax.jit`` before
+    any of this; the wrapper then runs the same checks to raise the clear error instead.
     """
-    params = inspect.signature(fun).parameters
+    sig = inspect.signature(fun)
+    params = sig.parameters
     # ``seq`` is static wherever it appears; the other names only as keyword options with a
     # default (so an array argument that happens to be called ``axis`` stays traced).
     static = [
@@ -180,7 +244,38 @@ def public(fun):
         for n, p in params.items()
         if n in STATIC_ARGS and (n == "seq" or p.default is not inspect.Parameter.empty)
     ]
-    return jax.jit(fun, static_argnames=static)
+
+    def validated(*args, **kwargs):
+        bound = sig.bind(*args, **kwargs)
+        for name, value in bound.arguments.items():
+            if name in static:
+                bound.arguments[name] = _check_static(name, value)
+            else:
+                _check_array(name, value)
+        return bound
+
+    @functools.wraps(fun)
+    def traced(*args, **kwargs):
+        bound = validated(*args, **kwargs)
+        _BATCHES.append([])
+        try:
+            return fun(*bound.args, **bound.kwargs)
+        finally:
+            _BATCHES.pop()
+
+    jitted = jax.jit(traced, static_argnames=static)
+
+    @functools.wraps(fun)
+    def call(*args, **kwargs):
+        try:
+            return jitted(*args, **kwargs)
+        except ValueError as err:
+            if "Non-hashable static arguments" not in str(err):
+                raise
+            validated(*args, **kwargs)  # raises the TypeError naming the argument
+            raise
+
+    return call
 
 
 # A gap below ``TIE_ULPS * eps * scale`` is a tie in exact arithmetic: LAPACK resolves the
