@@ -34,6 +34,7 @@ from ._numerics import (
     check_shape,
     from_scalar_last,
     hat,
+    like_rank,
     matmul,
     matvec,
     public,
@@ -428,7 +429,7 @@ def integrate_angular_velocity(
     _check_frame(frame)
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    h = jnp.asarray(dt).astype(q.dtype)[..., None]
+    h = like_rank(jnp.asarray(dt).astype(q.dtype)[..., None], q)
     q = to_scalar_last(q, scalar_first)
     if method == "exponential":
         dq = _rotvec_to_quat(w * h)
@@ -494,7 +495,7 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
     # b = pi - a1 when i != k and b = -a1 when i == k (rotating by pi about e_i flips e_j).
     flip = np.array([1.0, -1.0, 1.0])
     offset = np.array([np.pi, 0.0 if is_proper(seq) else np.pi, np.pi])
-    flip, offset = jnp.asarray(flip, x.dtype), jnp.asarray(offset, x.dtype)
+    flip, offset = like_rank(flip, x[0]), like_rank(offset, x[0])
 
     def nearest(c, prev):
         return c + two_pi * jnp.round((prev - c) / two_pi)

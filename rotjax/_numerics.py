@@ -107,34 +107,23 @@ def as_float(*xs):
 def check_shape(x, trailing: tuple[int, ...], name: str) -> None:
     """Raise ``ValueError`` at trace time unless ``x.shape`` ends with ``trailing``.
 
-    Inside a :func:`public` function it also checks that the leading (batch) shape of ``x``
-    broadcasts against those of the arguments checked before it, and otherwise raises a
-    ``ValueError`` naming both arguments and shapes (instead of a shape error from deep
-    inside JAX).
-
     Args:
         x: the array, after :func:`as_float`.
-        trailing: the shape its last axes must have, e.g. ``(3, 3)``; ``()`` checks only the
-            broadcasting of the batch shape.
+        trailing: the shape its last axes must have, e.g. ``(3, 3)``.
         name: the argument's name, for the message.
     """
     n = len(trailing)
     if x.ndim < n or tuple(x.shape[x.ndim - n :]) != tuple(trailing):
         want = "(..., " + ", ".join(str(t) for t in trailing) + ")"
         raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
-    if not _BATCHES:
-        return
-    seen = _BATCHES[-1]
-    lead = tuple(x.shape[: x.ndim - n])
-    for other, other_lead, other_shape in seen:
-        try:
-            np.broadcast_shapes(lead, other_lead)
-        except ValueError:
-            raise ValueError(
-                f"leading (batch) shapes do not broadcast: {other} has {other_lead} "
-                f"(shape {other_shape}) and {name} has {lead} (shape {tuple(x.shape)})"
-            ) from None
-    seen.append((name, lead, tuple(x.shape)))
+
+
+def like_rank(c, x, dtype=None):
+    """``c`` (an array or constant of trailing shape, e.g. ``(4,)``) in ``dtype`` (default:
+    ``x``'s), with leading unit axes up to ``x``'s rank: it broadcasts against ``x`` under
+    ``jax_numpy_rank_promotion="raise"`` (an explicit, not an implicit, rank promotion)."""
+    c = jnp.asarray(c, dtype=x.dtype if dtype is None else dtype)
+    return c.reshape((1,) * (x.ndim - c.ndim) + c.shape)
 
 
 def to_scalar_last(q, scalar_first: bool):
@@ -191,9 +180,44 @@ def vee(m):
 # Keyword arguments that select code paths: always static under jit.
 STATIC_ARGS = ("seq", "degrees", "scalar_first", "method", "frame", "axis")
 
-# One list per public call being traced (innermost last): the (name, leading shape, shape) of
-# each argument that :func:`check_shape` has seen, to check that batch shapes broadcast.
-_BATCHES: list[list[tuple[str, tuple[int, ...], tuple[int, ...]]]] = []
+# Trailing (non-batch) rank of each array argument, by the name the public functions give it:
+# ``(..., 4)`` quaternions, ``(..., 3, 3)`` matrices, ``(..., 3)`` and ``(..., 6)`` vectors,
+# ``(...)`` per-rotation scalars. A set or time axis counts as batch (``weights`` is
+# ``(..., N)`` against ``(..., N, 3)`` vectors).
+_TRAILING_RANK = {
+    **dict.fromkeys(("p", "q", "q_a", "q_b", "q_dot"), 1),
+    **dict.fromkeys(("R", "R_a", "R_b", "R_dot"), 2),
+    **dict.fromkeys(("omega", "v", "rotvec", "axis", "angles", "rates", "a", "b", "x"), 1),
+    **dict.fromkeys(("angle", "t", "dt", "weights", "damping"), 0),
+}
+
+
+def _broadcast_batches(arrays: dict) -> None:
+    """Check that the batch shapes of the array arguments in ``arrays`` (name -> array, updated
+    in place) broadcast, else raise ``ValueError`` naming both arguments and shapes (rather
+    than a shape error from deep inside JAX); then give them leading unit axes up to a common
+    batch rank, so that batches of different ranks broadcast with the explicit rank promotion
+    that ``jax_numpy_rank_promotion="raise"`` allows. Trailing shapes are checked later, by
+    :func:`check_shape` in the function."""
+    lead = {
+        n: jnp.shape(x)[: jnp.ndim(x) - _TRAILING_RANK[n]]
+        for n, x in arrays.items()
+        if n in _TRAILING_RANK and x is not None and jnp.ndim(x) >= _TRAILING_RANK[n]
+    }
+    names = list(lead)
+    for i, n in enumerate(names):
+        for m in names[:i]:
+            try:
+                np.broadcast_shapes(lead[m], lead[n])
+            except ValueError:
+                raise ValueError(
+                    f"leading (batch) shapes do not broadcast: {m} has {lead[m]} (shape "
+                    f"{jnp.shape(arrays[m])}) and {n} has {lead[n]} (shape {jnp.shape(arrays[n])})"
+                ) from None
+    rank = max((len(s) for s in lead.values()), default=0)
+    for n, s in lead.items():
+        if len(s) < rank:
+            arrays[n] = jnp.reshape(arrays[n], (1,) * (rank - len(s)) + jnp.shape(arrays[n]))
 
 
 def _check_static(name: str, value):
@@ -230,7 +254,8 @@ def public(fun):
       ``TypeError``. Unknown values raise ``ValueError`` in the function, listing the valid
       ones;
     * complex arrays raise ``TypeError``;
-    * :func:`check_shape` also checks that the arguments' batch shapes broadcast.
+    * the array arguments' batch shapes must broadcast (``ValueError`` naming both), and get
+      leading unit axes up to a common rank (:func:`_broadcast_batches`).
 
     A static argument that cannot be hashed (``seq`` as a list) fails in ``jax.jit`` before
     any of this; the wrapper then runs the same checks to raise the clear error instead.
@@ -254,14 +279,15 @@ def public(fun):
                 _check_array(name, value)
         return bound
 
+    arrays = [n for n in params if n not in static]
+
     @functools.wraps(fun)
     def traced(*args, **kwargs):
         bound = validated(*args, **kwargs)
-        _BATCHES.append([])
-        try:
-            return fun(*bound.args, **bound.kwargs)
-        finally:
-            _BATCHES.pop()
+        given = {n: bound.arguments[n] for n in arrays if n in bound.arguments}
+        _broadcast_batches(given)
+        bound.arguments.update(given)
+        return fun(*bound.args, **bound.kwargs)
 
     jitted = jax.jit(traced, static_argnames=static)
 

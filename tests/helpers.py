@@ -7,6 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 from hypothesis import strategies as st
 
+import rotjax as rj
+
 LETTER_SEQS = [a + b + c for a in "xyz" for b in "xyz" for c in "xyz" if a != b and b != c]
 SEQS = LETTER_SEQS + [s.upper() for s in LETTER_SEQS]  # 12 extrinsic + 12 intrinsic
 DIGIT_SEQS = ["313", "123", "121", "232", "321"]
@@ -66,6 +68,86 @@ def fd_jacobian(f, x, h=1e-6):
             np.asarray(f(jnp.asarray(x + e))) - np.asarray(f(jnp.asarray(x - e)))
         ) / (2 * h)
     return jac
+
+
+# --- one call of every public function ------------------------------------------------------
+
+# Functions whose input has a set or time axis before the trailing one (besides the batch).
+SET_AXIS = ("quaternion_mean", "align_vectors", "align_vectors q-method", "unwrap_euler")
+
+
+def every_public(q, r, w, a):
+    """One call of every public function (name -> (function, inputs)), built from ``n``
+    quaternions ``q``, their matrices ``r``, rotation vectors ``w`` and ZYX angles ``a``."""
+    n = len(q)
+    # quaternions near q[0], of both signs and not unit: a mean that is well conditioned (the
+    # mean of uniformly random rotations is not: its 4x4 scatter matrix has close eigenvalues)
+    cluster = (q[0] + q / 5) * np.where(np.arange(n) % 2 == 0, 1, -1).astype(q.dtype)[:, None]
+    return {
+        "quaternion_to_matrix": (rj.quaternion_to_matrix, (q,)),
+        "matrix_to_quaternion": (lambda r: rj.matrix_to_quaternion(r, method="optimal"), (r,)),
+        "quaternion_to_rotvec": (rj.quaternion_to_rotvec, (q,)),
+        "rotvec_to_quaternion": (rj.rotvec_to_quaternion, (w,)),
+        "rotvec_to_matrix": (rj.rotvec_to_matrix, (w,)),
+        "matrix_to_rotvec": (rj.matrix_to_rotvec, (r,)),
+        "quaternion_to_axis_angle": (lambda q: rj.quaternion_to_axis_angle(q)[0], (q,)),
+        "axis_angle_to_quaternion": (rj.axis_angle_to_quaternion, (w, a[:, 0])),
+        "quaternion_to_euler": (lambda q: rj.quaternion_to_euler(q, "ZYX"), (q,)),
+        "matrix_to_euler": (lambda r: rj.matrix_to_euler(r, "zxz"), (r,)),
+        "euler_to_matrix": (lambda a: rj.euler_to_matrix(a, "ZYX"), (a,)),
+        "euler_to_quaternion": (lambda a: rj.euler_to_quaternion(a, "313"), (a,)),
+        "quaternion_normalize": (rj.quaternion_normalize, (q,)),
+        "quaternion_conjugate": (rj.quaternion_conjugate, (q,)),
+        "quaternion_inverse": (rj.quaternion_inverse, (q,)),
+        "quaternion_multiply": (rj.quaternion_multiply, (q, q[::-1])),
+        "quaternion_apply": (rj.quaternion_apply, (q, w)),
+        "relative_rotation": (rj.relative_rotation, (q, q[::-1])),
+        "rotation_angle": (rj.rotation_angle, (q,)),
+        "angle_between": (rj.angle_between, (q, q[::-1])),
+        "slerp": (lambda p, q: rj.slerp(p, q, 0.3), (q, q[::-1])),
+        "quaternion_mean": (rj.quaternion_mean, (cluster,)),
+        "align_vectors": (rj.align_vectors, (w, a)),
+        "align_vectors q-method": (lambda a, b: rj.align_vectors(a, b, method="q-method"), (w, a)),
+        "chordal_distance": (rj.chordal_distance, (r, r[::-1])),
+        "geodesic_distance": (rj.geodesic_distance, (r, r[::-1])),
+        "matrix_to_sixd": (rj.matrix_to_sixd, (r,)),
+        "sixd_to_matrix": (lambda x: rj.sixd_to_matrix(x), (r[:, :2].reshape(n, 6),)),
+        "nined_to_matrix": (rj.nined_to_matrix, (r.reshape(n, 9),)),
+        "euler_rate_matrix": (lambda a: rj.euler_rate_matrix(a, "ZXZ", frame="world"), (a,)),
+        "euler_rates_to_angular_velocity": (
+            lambda a, w: rj.euler_rates_to_angular_velocity(a, w, "ZYX"),
+            (a, w),
+        ),
+        "angular_velocity_to_euler_rates": (
+            lambda a, w: rj.angular_velocity_to_euler_rates(a, w, "ZYX", damping=0.1),
+            (a, w),
+        ),
+        "euler_singularity": (lambda a: rj.euler_singularity(a, "XYZ"), (a,)),
+        "unwrap_euler": (lambda a: rj.unwrap_euler(a, "ZYX"), (a,)),
+        "quaternion_derivative": (rj.quaternion_derivative, (q, w)),
+        "quaternion_derivative_to_angular_velocity": (
+            rj.quaternion_derivative_to_angular_velocity,
+            (q, q[::-1]),
+        ),
+        "matrix_derivative_to_angular_velocity": (
+            lambda r, d: rj.matrix_derivative_to_angular_velocity(r, d, frame="world"),
+            (r, r[::-1]),
+        ),
+        "angular_velocity_to_matrix_derivative": (rj.angular_velocity_to_matrix_derivative, (r, w)),
+        "integrate_angular_velocity": (
+            lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="rk4"),
+            (q, w),
+        ),
+    }
+
+
+def public_inputs(n, dtype):
+    """The inputs of :func:`every_public` for ``n`` random rotations (seed 21), in ``dtype``:
+    quaternions, their matrices, rotation vectors and ZYX angles."""
+    q = random_quaternions(n, seed=21)
+    derived = rj.quaternion_to_matrix(q), rj.quaternion_to_rotvec(q)
+    derived += (rj.quaternion_to_euler(q, "ZYX"),)
+    return [np.asarray(x).astype(dtype) for x in (q, *derived)]
 
 
 # --- hypothesis strategies -----------------------------------------------------------------
