@@ -134,12 +134,14 @@ def geodesic_distance(R_a, R_b):
         derivative, of unit size along the geodesic). Likewise at exactly pi, where the sine
         term vanishes, the gradient is 0 (a ridge). For a smooth loss use the squared distance.
         Inputs are assumed orthogonal; for other matrices this is a smooth function of their
-        entries, but not a distance.
+        entries, but not a distance. An infinite or NaN component gives NaN.
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
     M = matmul(_mT(R_a), R_b)
     c = 0.5 * (jnp.trace(M, axis1=-2, axis2=-1) - 1)
-    return safe_atan2(safe_norm(vee(M)), c).astype(dt)
+    s = safe_norm(vee(M))
+    # atan2 of an infinite sine is a finite pi/2: an infinite component gives NaN instead.
+    return jnp.where(jnp.isfinite(s) & jnp.isfinite(c), safe_atan2(s, c), jnp.nan).astype(dt)
 
 
 @public
