@@ -274,3 +274,103 @@ def mp_matrix_to_quaternion(R, dps=40):
         if q[3] < 0:
             q = [-c for c in q]
         return [float(c) for c in q], q
+
+
+# --- trouble-seeking batches (fuzzing) ---------------------------------------------------------
+
+# Input scales every function must handle today, as exponents of two: about 1e-10..1e10 in
+# float64 and 1e-6..1e6 in float32. (The full finite range is tested per function elsewhere.)
+SCALE_EXP = {np.float32: 20, np.float64: 33}
+QUAT_KINDS = ("generic", "identity", "near_identity", "half_turn", "near_half_turn", "tie",
+              "lock", "near_lock", "tiny_vector")  # fmt: skip
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def trouble_quaternions(kinds, rng, seq="ZYX", tiny_exp=(-150, -20)):
+    """Unit quaternions (float64, scalar last), one per entry of ``kinds`` (see
+    :data:`QUAT_KINDS`): exactly at and near the identity and 180 degrees, component ties
+    (equal magnitudes, as where the largest-component branch switches), exactly at and within
+    1e-9 (relative) of gimbal lock of ``seq``, and vector parts of ``10^tiny_exp``."""
+    n = len(kinds)
+    q = _unit(rng.normal(size=(n, 4)))
+    tiny = 10.0 ** rng.uniform(-12, -5, size=(n, 1))
+    for i, kind in enumerate(kinds):
+        if kind == "identity":
+            q[i] = [0, 0, 0, 1]
+        elif kind == "near_identity":
+            q[i] = _unit(np.append(tiny[i] * q[i, :3], 1.0))
+        elif kind == "half_turn":
+            q[i] = np.append(_unit(q[i, :3]), 0.0)
+        elif kind == "near_half_turn":
+            q[i] = _unit(np.append(q[i, :3], tiny[i]))
+        elif kind == "tie":
+            signs = rng.choice([-1.0, 1.0], size=4)
+            mask = rng.permutation([1.0, 1.0, 1.0, 0.0] if rng.random() < 0.5 else [1.0] * 4)
+            q[i] = _unit(signs * np.where(mask > 0, 1.0, rng.uniform(0.1, 0.9)))
+        elif kind in ("lock", "near_lock"):
+            a = rng.uniform(-np.pi, np.pi, size=3)
+            a[1] = lock_middles(seq)[rng.integers(2)]
+            if kind == "near_lock":
+                a[1] += tiny[i, 0] * 1e-4 * rng.choice([-1.0, 1.0])
+            q[i] = mp_euler_quaternion(a, seq)
+        elif kind == "tiny_vector":
+            q[i] = _unit(np.append(10.0 ** rng.uniform(*tiny_exp) * q[i, :3], 1.0))
+    return q
+
+
+def mp_euler_quaternion(angles, seq):
+    """Scalar-last quaternion of Euler angles by Hamilton products of elementary quaternions
+    in float64 numpy (an independent construction, not rotjax's)."""
+    from rotjax._euler import parse_seq
+
+    axes, intrinsic = parse_seq(seq)
+    qs = []
+    for ax, a in zip(axes, angles, strict=True):
+        e = np.zeros(4)
+        e[ax], e[3] = np.sin(a / 2), np.cos(a / 2)
+        qs.append(e)
+    if not intrinsic:
+        qs = qs[::-1]
+    out = qs[0]
+    for e in qs[1:]:
+        out = _hamilton(out, e)
+    return out
+
+
+def _hamilton(p, q):
+    (px, py, pz, pw), (qx, qy, qz, qw) = p, q
+    return np.array(
+        [
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+            pw * qw - px * qx - py * qy - pz * qz,
+        ]
+    )
+
+
+@st.composite
+def trouble_batches(draw, dtype, n=64):
+    """A batch of ``n`` troubled rotations in ``dtype``, as the four inputs of
+    :func:`every_public`: quaternions (not unit: random power-of-two-and-odd scales over
+    :data:`SCALE_EXP`, random signs), their matrices with noise of up to 1e-3 (not orthogonal)
+    and scaled, rotation vectors (angles at and near 0 and pi) and ZYX angles (some at and
+    near gimbal lock); plus the unit quaternions in float64 for reference."""
+    kinds = draw(st.lists(st.sampled_from(QUAT_KINDS), min_size=n, max_size=n))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    # vector parts whose square is still a normal number
+    unit = trouble_quaternions(
+        kinds, rng, tiny_exp=(-18, -6) if dtype == np.float32 else (-150, -20)
+    )
+    k = SCALE_EXP[dtype]
+    scale = 2.0 ** rng.integers(-k, k + 1, size=(n, 1)) * rng.uniform(0.5, 1.5, size=(n, 1))
+    q = unit * scale * rng.choice([-1.0, 1.0], size=(n, 1))
+    R = np.asarray(rj.quaternion_to_matrix(unit))
+    noise = rng.normal(size=(n, 3, 3)) * 10.0 ** rng.uniform(-16, -3, size=(n, 1, 1))
+    R_noisy = (R + noise * (rng.random((n, 1, 1)) < 0.5)) * scale[:, :, None]
+    w = np.asarray(rj.quaternion_to_rotvec(unit))
+    a = np.asarray(rj.quaternion_to_euler(unit, "ZYX"))
+    return [x.astype(dtype) for x in (q, R_noisy, w, a)], unit
