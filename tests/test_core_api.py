@@ -16,6 +16,7 @@ from helpers import (
     public_inputs,
     random_quaternions,
 )
+from jax.test_util import check_grads
 
 import rotjax as rj
 
@@ -510,3 +511,48 @@ def test_nan_and_inf_stay_in_their_batch_element(name, bad):
             keep = [0, 2, 3]
             np.testing.assert_array_equal(o[keep], c[keep], err_msg=f"{name}, argument {arg}")
         assert not all(np.all(np.isfinite(np.asarray(o)[1])) for o in out), (name, arg, out)
+
+
+# --- sixd_to_matrix at every finite scale ------------------------------------------------------
+
+SIXD = np.concatenate([R[:16, :, 0], R[:16, :, 1] + 0.3 * R[:16, :, 2]], axis=-1)  # a2 not unit
+
+
+@pytest.mark.parametrize(
+    "dtype,exps",
+    [(np.float32, [-30, -20, -5, 0, 7, 20, 30]), (np.float64, [-300, -155, 0, 160, 300])],
+)
+def test_sixd_to_matrix_is_scale_invariant_with_finite_gradients(dtype, exps):
+    """Each half of the 6D vector scaled by 10^k (independently) gives the same matrix within
+    2 eps, and the gradient scales as 1/10^k (the map is homogeneous of degree 0 in each
+    half), finite. Before the power-of-two prescaling, float32 gave zeros at 1e20 and NaN at
+    1e-20."""
+    eps = np.finfo(dtype).eps
+    x = SIXD.astype(dtype)
+    ref = np.asarray(rj.sixd_to_matrix(x), np.float64)
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=ref.shape).astype(dtype)  # a random linear functional of the output
+    grad = jax.jit(jax.grad(lambda x: jnp.sum(rj.sixd_to_matrix(x) * w)))
+    g_ref = np.asarray(grad(x), np.float64)
+    for k1 in exps:
+        for k2 in (exps[0], 0, exps[-1]):
+            s = np.array([10.0**k1] * 3 + [10.0**k2] * 3)
+            xs = (x.astype(np.float64) * s).astype(dtype)
+            out = np.asarray(rj.sixd_to_matrix(xs), np.float64)
+            assert np.abs(out - ref).max() <= 2 * eps, (k1, k2, np.abs(out - ref).max() / eps)
+            g = np.asarray(grad(xs), np.float64) * s
+            assert np.all(np.isfinite(g)), (k1, k2)
+            assert np.abs(g - g_ref).max() <= 64 * eps * np.abs(g_ref).max(), (k1, k2)
+
+
+def test_sixd_to_matrix_gradient_is_the_derivative():
+    check_grads(rj.sixd_to_matrix, (SIXD[:4],), order=2, modes=["fwd", "rev"])
+    check_grads(rj.sixd_to_matrix, (1e-200 * SIXD[:4],), order=1, eps=1e-206)
+
+
+@pytest.mark.parametrize("bad", [0.0, np.inf, np.nan], ids=str)
+def test_sixd_to_matrix_nan_for_no_rotation(bad):
+    x = SIXD[:2].copy()
+    x[0, :3] = bad
+    out = np.asarray(rj.sixd_to_matrix(x))
+    assert np.all(np.isnan(out[0])) and np.all(np.isfinite(out[1]))
