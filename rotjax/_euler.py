@@ -19,6 +19,7 @@ from ._numerics import (
     as_float,
     check_shape,
     from_scalar_last,
+    like_rank,
     public,
     to_scalar_last,
 )
@@ -316,10 +317,10 @@ def _quat_to_euler(q, seq):
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
     ang = jnp.stack([_atan2(num[n], den[n]) for n in order], axis=-1)
-    out = ang * np.array(factor, dtype=ang.dtype) + np.array(shift, dtype=ang.dtype)
+    out = ang * like_rank(factor, ang) + like_rank(shift, ang)
     # The substitution makes the zeroed angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: set it exactly.
-    out = jnp.where((locks[0] | locks[1])[..., None] & _LAST, 0.0, out)
+    out = jnp.where((locks[0] | locks[1])[..., None] & like_rank(_LAST, out, bool), 0.0, out)
     return jnp.where(bad[..., None], jnp.nan, out)
 
 
@@ -393,7 +394,7 @@ def _contract(jac, dx):
 def _quat_to_euler_jvp(seq, primals, tangents):
     # The exact derivative of the code above (see _euler_jacobian).
     (q,), (dq,) = primals, tangents
-    e = [jnp.asarray(v, dtype=q.dtype) for v in _abcd_patterns(seq)]
+    e = [like_rank(v, q) for v in _abcd_patterns(seq)]
     jac = _euler_jacobian([q[..., i] for i in range(4)], seq, 4, lambda _: e)
     return _quat_to_euler(q, seq), _contract(jac, dq)
 
@@ -441,7 +442,7 @@ def _matrix_to_euler_jvp(seq, primals, tangents):
     pat = _tangent_patterns(seq).astype(R.dtype)
 
     def patterns(wide):
-        return [sum(wide[i] * pat[t, i] for i in range(4)) for t in range(4)]
+        return [sum(wide[i] * like_rank(pat[t, i], wide[i]) for i in range(4)) for t in range(4)]
 
     u = jnp.stack(_rotation_tangent(R, dR), axis=-1) / 4
     return _matrix_to_euler(R, seq), _contract(_euler_jacobian(comps, seq, 3, patterns), u)

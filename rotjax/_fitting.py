@@ -27,6 +27,7 @@ from ._numerics import (
     cross,
     eps,
     from_scalar_last,
+    like_rank,
     matmul,
     public,
     safe_atan2,
@@ -133,12 +134,14 @@ def geodesic_distance(R_a, R_b):
         derivative, of unit size along the geodesic). Likewise at exactly pi, where the sine
         term vanishes, the gradient is 0 (a ridge). For a smooth loss use the squared distance.
         Inputs are assumed orthogonal; for other matrices this is a smooth function of their
-        entries, but not a distance.
+        entries, but not a distance. An infinite or NaN component gives NaN.
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
     M = matmul(_mT(R_a), R_b)
     c = 0.5 * (jnp.trace(M, axis1=-2, axis2=-1) - 1)
-    return safe_atan2(safe_norm(vee(M)), c).astype(dt)
+    s = safe_norm(vee(M))
+    # atan2 of an infinite sine is a finite pi/2: an infinite component gives NaN instead.
+    return jnp.where(jnp.isfinite(s) & jnp.isfinite(c), safe_atan2(s, c), jnp.nan).astype(dt)
 
 
 @public
@@ -180,17 +183,38 @@ def sixd_to_matrix(x):
 
     Note:
         Defined and smooth wherever ``a1 != 0`` and ``a2`` is not parallel to ``a1``; there it
-        is undefined and returns NaN on purpose (no rotation is closer than any other). The
-        map is surjective and continuous, unlike quaternions or Euler angles read as network
-        outputs, which is why it regresses better.
+        is undefined and returns NaN on purpose (no rotation is closer than any other), as
+        for an infinite or NaN component. The two halves are prescaled by exact powers of
+        two, so any finite non-zero scale of either gives the same matrix (float32 from 1e-30
+        to 1e30, float64 from 1e-300 to 1e300), with finite gradients.
+        The map is surjective and continuous, unlike quaternions or Euler angles read as
+        network outputs, which is why it regresses better.
     """
     (x,), dt = as_float(x)
     check_shape(x, (6,), "x")
-    a1, a2 = x[..., :3], x[..., 3:]
+    a1, a2 = _pow2_prescale(x[..., :3]), _pow2_prescale(x[..., 3:])
     b1 = a1 / jnp.sqrt(jnp.sum(a1 * a1, axis=-1, keepdims=True))
-    u2 = a2 - jnp.sum(b1 * a2, axis=-1, keepdims=True) * b1
+    u2 = _pow2_prescale(a2 - jnp.sum(b1 * a2, axis=-1, keepdims=True) * b1)
     b2 = u2 / jnp.sqrt(jnp.sum(u2 * u2, axis=-1, keepdims=True))
     return jnp.stack([b1, b2, cross(b1, b2)], axis=-1).astype(dt)
+
+
+def _pow2_prescale(v):
+    """``v`` (``(..., 3)``) times the power of two that brings its largest component into
+    ``[1/2, 1)``: exact (no rounding, unless a much smaller component becomes subnormal, which
+    is below eps relative to the largest), so its square norm neither overflows nor underflows.
+
+    Applied to vectors that are only used through their direction (``b = v / |v|`` is
+    homogeneous of degree 0 in ``v``), the scale's own derivative contributes nothing
+    (``b'(v) v = 0``): it is held constant. Zero, infinite and NaN vectors are left as they
+    are (and give NaN downstream, as they must)."""
+    big = jax.lax.stop_gradient(jnp.max(jnp.abs(v), axis=-1, keepdims=True))
+    finite = jnp.isfinite(big) & (big > 0)
+    _, e = jnp.frexp(jnp.where(finite, big, 1.0))
+    # 2^-e in two factors: one alone would overflow for a subnormal ``big`` in float32.
+    half = -e // 2
+    one = jnp.ones((), v.dtype)
+    return v * jnp.ldexp(one, half) * jnp.ldexp(one, -e - half)
 
 
 @public
@@ -368,8 +392,9 @@ def slerp(p, q, t, scalar_first: bool = False):
     (p, q, t), dt = as_float(p, q, t)
     check_shape(p, (4,), "p")
     check_shape(q, (4,), "q")
+    check_shape(t, (), "t")
     p = _normalize(to_scalar_last(p, scalar_first))
     q = to_scalar_last(q, scalar_first)
     rel = _quat_to_rotvec(_multiply(_conjugate(p), q))  # angle in [0, pi]: the shorter arc
-    out = _multiply(p, _rotvec_to_quat(t[..., None] * rel))
+    out = _multiply(p, _rotvec_to_quat(like_rank(t[..., None], rel) * rel))
     return from_scalar_last(out, scalar_first).astype(dt)

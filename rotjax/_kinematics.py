@@ -37,6 +37,7 @@ from ._numerics import (
     cross,
     from_scalar_last,
     hat,
+    like_rank,
     matmul,
     matvec,
     public,
@@ -442,7 +443,7 @@ def integrate_angular_velocity(
         ``omega`` between them (second or fourth order).
     """
     q, w, out_dt = _propagation_args(q, omega, frame, method, METHODS, "q")
-    h = jnp.asarray(dt).astype(q.dtype)[..., None]
+    h = like_rank(jnp.asarray(dt).astype(q.dtype)[..., None], q)
     q = to_scalar_last(q, scalar_first)
     if method == "exponential":
         dq = _rotvec_to_quat(w * h)
@@ -504,9 +505,7 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
     # b = pi - a1 when i != k and b = -a1 when i == k (rotating by pi about e_i flips e_j).
     flip = np.array([1.0, -1.0, 1.0])
     offset = np.array([np.pi, 0.0 if is_proper(seq) else np.pi, np.pi])
-    lead = (1,) * (x.ndim - 2)  # explicit ranks: no implicit rank promotion
-    flip = jnp.asarray(flip, x.dtype).reshape(lead + (3,))
-    offset = jnp.asarray(offset, x.dtype).reshape(lead + (3,))
+    flip, offset = like_rank(flip, x[0]), like_rank(offset, x[0])
 
     def nearest(c, prev):
         return c + two_pi * jnp.round((prev - c) / two_pi)

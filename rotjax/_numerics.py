@@ -13,6 +13,7 @@ Everything here is private. The helpers follow two rules that the public functio
 
 from __future__ import annotations
 
+import functools
 import inspect
 
 import jax
@@ -104,11 +105,25 @@ def as_float(*xs):
 
 
 def check_shape(x, trailing: tuple[int, ...], name: str) -> None:
-    """Raise ``ValueError`` at trace time unless ``x.shape`` ends with ``trailing``."""
+    """Raise ``ValueError`` at trace time unless ``x.shape`` ends with ``trailing``.
+
+    Args:
+        x: the array, after :func:`as_float`.
+        trailing: the shape its last axes must have, e.g. ``(3, 3)``.
+        name: the argument's name, for the message.
+    """
     n = len(trailing)
     if x.ndim < n or tuple(x.shape[x.ndim - n :]) != tuple(trailing):
         want = "(..., " + ", ".join(str(t) for t in trailing) + ")"
         raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
+
+
+def like_rank(c, x, dtype=None):
+    """``c`` (an array or constant of trailing shape, e.g. ``(4,)``) in ``dtype`` (default:
+    ``x``'s), with leading unit axes up to ``x``'s rank: it broadcasts against ``x`` under
+    ``jax_numpy_rank_promotion="raise"`` (an explicit, not an implicit, rank promotion)."""
+    c = jnp.asarray(c, dtype=x.dtype if dtype is None else dtype)
+    return c.reshape((1,) * (x.ndim - c.ndim) + c.shape)
 
 
 def to_scalar_last(q, scalar_first: bool):
@@ -165,14 +180,88 @@ def vee(m):
 # Keyword arguments that select code paths: always static under jit.
 STATIC_ARGS = ("seq", "degrees", "scalar_first", "method", "frame", "axis")
 
+# Trailing (non-batch) rank of each array argument, by the name the public functions give it:
+# ``(..., 4)`` quaternions, ``(..., 3, 3)`` matrices, ``(..., 3)`` and ``(..., 6)`` vectors,
+# ``(...)`` per-rotation scalars. A set or time axis counts as batch (``weights`` is
+# ``(..., N)`` against ``(..., N, 3)`` vectors).
+_TRAILING_RANK = {
+    **dict.fromkeys(("p", "q", "q_a", "q_b", "q_dot"), 1),
+    **dict.fromkeys(("R", "R_a", "R_b", "R_dot"), 2),
+    **dict.fromkeys(("omega", "v", "rotvec", "axis", "angles", "rates", "a", "b", "x"), 1),
+    **dict.fromkeys(("angle", "t", "dt", "weights", "damping"), 0),
+}
+
+
+def _broadcast_batches(arrays: dict) -> None:
+    """Check that the batch shapes of the array arguments in ``arrays`` (name -> array, updated
+    in place) broadcast, else raise ``ValueError`` naming both arguments and shapes (rather
+    than a shape error from deep inside JAX); then give them leading unit axes up to a common
+    batch rank, so that batches of different ranks broadcast with the explicit rank promotion
+    that ``jax_numpy_rank_promotion="raise"`` allows. Trailing shapes are checked later, by
+    :func:`check_shape` in the function."""
+    lead = {
+        n: jnp.shape(x)[: jnp.ndim(x) - _TRAILING_RANK[n]]
+        for n, x in arrays.items()
+        if n in _TRAILING_RANK and x is not None and jnp.ndim(x) >= _TRAILING_RANK[n]
+    }
+    names = list(lead)
+    for i, n in enumerate(names):
+        for m in names[:i]:
+            try:
+                np.broadcast_shapes(lead[m], lead[n])
+            except ValueError:
+                raise ValueError(
+                    f"leading (batch) shapes do not broadcast: {m} has {lead[m]} (shape "
+                    f"{jnp.shape(arrays[m])}) and {n} has {lead[n]} (shape {jnp.shape(arrays[n])})"
+                ) from None
+    rank = max((len(s) for s in lead.values()), default=0)
+    for n, s in lead.items():
+        if len(s) < rank:
+            arrays[n] = jnp.reshape(arrays[n], (1,) * (rank - len(s)) + jnp.shape(arrays[n]))
+
+
+def _check_static(name: str, value):
+    """Validate one configuration argument's type (its value is checked by the function that
+    reads it, which knows the valid choices) and return it in canonical form."""
+    if name in ("degrees", "scalar_first"):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name} must be a bool, got {type(value).__name__} {value!r}")
+        return bool(value)
+    if name == "axis":
+        # Any integer-like value (a NumPy integer included), but not a bool.
+        if isinstance(value, (bool, np.bool_)) or not hasattr(value, "__index__"):
+            raise TypeError(f"axis must be an int, got {type(value).__name__} {value!r}")
+        return int(value.__index__())
+    if not isinstance(value, str):  # seq, method, frame
+        raise TypeError(f"{name} must be a str, got {type(value).__name__} {value!r}")
+    return value
+
+
+def _check_array(name: str, value) -> None:
+    """Reject complex input, whose imaginary part would otherwise be dropped silently."""
+    if value is not None and jnp.iscomplexobj(value):
+        raise TypeError(f"{name} must be real (float or integer), got complex {value.dtype}")
+
 
 def public(fun):
     """Jit-wrap a public function, with the configuration arguments it takes made static.
 
     Parsing and validation of those arguments then happens once, in Python, at trace time:
-    errors are raised eagerly and cost nothing on later calls.
+    errors are raised eagerly and cost nothing on later calls. Before the function body runs,
+
+    * ``seq``, ``method`` and ``frame`` must be ``str``, ``degrees`` and ``scalar_first``
+      ``bool`` (or a NumPy bool) and ``axis`` an integer (a NumPy integer included); otherwise
+      ``TypeError``. Unknown values raise ``ValueError`` in the function, listing the valid
+      ones;
+    * complex arrays raise ``TypeError``;
+    * the array arguments' batch shapes must broadcast (``ValueError`` naming both), and get
+      leading unit axes up to a common rank (:func:`_broadcast_batches`).
+
+    A static argument that cannot be hashed (``seq`` as a list) fails in ``jax.jit`` before
+    any of this; the wrapper then runs the same checks to raise the clear error instead.
     """
-    params = inspect.signature(fun).parameters
+    sig = inspect.signature(fun)
+    params = sig.parameters
     # ``seq`` is static wherever it appears; the other names only as keyword options with a
     # default (so an array argument that happens to be called ``axis`` stays traced).
     static = [
@@ -180,7 +269,39 @@ def public(fun):
         for n, p in params.items()
         if n in STATIC_ARGS and (n == "seq" or p.default is not inspect.Parameter.empty)
     ]
-    return jax.jit(fun, static_argnames=static)
+
+    def validated(*args, **kwargs):
+        bound = sig.bind(*args, **kwargs)
+        for name, value in bound.arguments.items():
+            if name in static:
+                bound.arguments[name] = _check_static(name, value)
+            else:
+                _check_array(name, value)
+        return bound
+
+    arrays = [n for n in params if n not in static]
+
+    @functools.wraps(fun)
+    def traced(*args, **kwargs):
+        bound = validated(*args, **kwargs)
+        given = {n: bound.arguments[n] for n in arrays if n in bound.arguments}
+        _broadcast_batches(given)
+        bound.arguments.update(given)
+        return fun(*bound.args, **bound.kwargs)
+
+    jitted = jax.jit(traced, static_argnames=static)
+
+    @functools.wraps(fun)
+    def call(*args, **kwargs):
+        try:
+            return jitted(*args, **kwargs)
+        except ValueError as err:
+            if "Non-hashable static arguments" not in str(err):
+                raise
+            validated(*args, **kwargs)  # raises the TypeError naming the argument
+            raise
+
+    return call
 
 
 # A gap below ``TIE_ULPS * eps * scale`` is a tie in exact arithmetic: LAPACK resolves the

@@ -14,6 +14,7 @@ from ._numerics import (
     check_shape,
     cross,
     from_scalar_last,
+    like_rank,
     public,
     safe_atan2,
     safe_norm,
@@ -51,7 +52,7 @@ def _multiply(p, q):
 
 
 def _conjugate(q):
-    return q * jnp.asarray([-1, -1, -1, 1], dtype=q.dtype)
+    return q * like_rank([-1, -1, -1, 1], q)
 
 
 def _normalize(q):

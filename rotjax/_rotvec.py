@@ -11,6 +11,7 @@ from ._numerics import (
     eps,
     from_scalar_last,
     hat,
+    like_rank,
     matmul,
     public,
     safe_norm,
@@ -131,7 +132,7 @@ def rotvec_to_matrix(rotvec, degrees: bool = False):
     a = (2 * k * c)[..., None, None]
     b = (2 * k * k)[..., None, None]
     K = hat(v)
-    eye = jnp.eye(3, dtype=v.dtype)
+    eye = like_rank(jnp.eye(3, dtype=v.dtype), K)
     return (eye + a * K + b * matmul(K, K)).astype(dt)
 
 

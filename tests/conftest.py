@@ -1,4 +1,6 @@
-"""Strict test environment: float64 enabled, strict dtype promotion, a deadline-free profile."""
+"""Strict test environment: float64 enabled, strict dtype promotion, no implicit rank promotion
+(JAX's own test setting: a constant of shape ``(4,)`` must not broadcast silently against a
+``(..., 4)`` batch), a deadline-free profile."""
 
 import jax
 import numpy as np
@@ -6,6 +8,7 @@ from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
+jax.config.update("jax_numpy_rank_promotion", "raise")
 
 settings.register_profile(
     "rotjax",

@@ -7,6 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 from hypothesis import strategies as st
 
+import rotjax as rj
+
 LETTER_SEQS = [a + b + c for a in "xyz" for b in "xyz" for c in "xyz" if a != b and b != c]
 SEQS = LETTER_SEQS + [s.upper() for s in LETTER_SEQS]  # 12 extrinsic + 12 intrinsic
 DIGIT_SEQS = ["313", "123", "121", "232", "321"]
@@ -66,6 +68,143 @@ def fd_jacobian(f, x, h=1e-6):
             np.asarray(f(jnp.asarray(x + e))) - np.asarray(f(jnp.asarray(x - e)))
         ) / (2 * h)
     return jac
+
+
+# --- one call of every public function ------------------------------------------------------
+
+# Functions whose input has a set or time axis before the trailing one (besides the batch).
+SET_AXIS = ("quaternion_mean", "align_vectors", "align_vectors q-method", "unwrap_euler")
+
+
+# Oblique Davenport axes (the third axis is not perpendicular to the second's plane's normal).
+_OBLIQUE = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [np.cos(2.0), 0.0, np.sin(2.0)]]
+
+
+def every_public(q, r, w, a):
+    """One call of every public function (name -> (function, inputs)), built from ``n``
+    quaternions ``q``, their matrices ``r``, rotation vectors ``w`` and ZYX angles ``a``."""
+    n = len(q)
+    # quaternions near q[0], of both signs and not unit: a mean that is well conditioned (the
+    # mean of uniformly random rotations is not: its 4x4 scatter matrix has close eigenvalues)
+    cluster = (q[0] + q / 5) * np.where(np.arange(n) % 2 == 0, 1, -1).astype(q.dtype)[:, None]
+    return {
+        "quaternion_to_matrix": (rj.quaternion_to_matrix, (q,)),
+        "matrix_to_quaternion": (lambda r: rj.matrix_to_quaternion(r, method="optimal"), (r,)),
+        "quaternion_to_rotvec": (rj.quaternion_to_rotvec, (q,)),
+        "rotvec_to_quaternion": (rj.rotvec_to_quaternion, (w,)),
+        "rotvec_to_matrix": (rj.rotvec_to_matrix, (w,)),
+        "matrix_to_rotvec": (rj.matrix_to_rotvec, (r,)),
+        "quaternion_to_axis_angle": (lambda q: rj.quaternion_to_axis_angle(q)[0], (q,)),
+        "axis_angle_to_quaternion": (rj.axis_angle_to_quaternion, (w, a[:, 0])),
+        "quaternion_to_euler": (lambda q: rj.quaternion_to_euler(q, "ZYX"), (q,)),
+        "matrix_to_euler": (lambda r: rj.matrix_to_euler(r, "zxz"), (r,)),
+        "euler_to_matrix": (lambda a: rj.euler_to_matrix(a, "ZYX"), (a,)),
+        "euler_to_quaternion": (lambda a: rj.euler_to_quaternion(a, "313"), (a,)),
+        "quaternion_normalize": (rj.quaternion_normalize, (q,)),
+        "quaternion_conjugate": (rj.quaternion_conjugate, (q,)),
+        "quaternion_inverse": (rj.quaternion_inverse, (q,)),
+        "quaternion_multiply": (rj.quaternion_multiply, (q, q[::-1])),
+        "quaternion_apply": (rj.quaternion_apply, (q, w)),
+        "relative_rotation": (rj.relative_rotation, (q, q[::-1])),
+        "rotation_angle": (rj.rotation_angle, (q,)),
+        "angle_between": (rj.angle_between, (q, q[::-1])),
+        "slerp": (lambda p, q: rj.slerp(p, q, 0.3), (q, q[::-1])),
+        "quaternion_mean": (rj.quaternion_mean, (cluster,)),
+        "align_vectors": (rj.align_vectors, (w, a)),
+        "align_vectors q-method": (lambda a, b: rj.align_vectors(a, b, method="q-method"), (w, a)),
+        "chordal_distance": (rj.chordal_distance, (r, r[::-1])),
+        "geodesic_distance": (rj.geodesic_distance, (r, r[::-1])),
+        "matrix_to_sixd": (rj.matrix_to_sixd, (r,)),
+        "sixd_to_matrix": (lambda x: rj.sixd_to_matrix(x), (r[:, :2].reshape(n, 6),)),
+        "nined_to_matrix": (rj.nined_to_matrix, (r.reshape(n, 9),)),
+        "euler_rate_matrix": (lambda a: rj.euler_rate_matrix(a, "ZXZ", frame="world"), (a,)),
+        "euler_rates_to_angular_velocity": (
+            lambda a, w: rj.euler_rates_to_angular_velocity(a, w, "ZYX"),
+            (a, w),
+        ),
+        "angular_velocity_to_euler_rates": (
+            lambda a, w: rj.angular_velocity_to_euler_rates(a, w, "ZYX", damping=0.1),
+            (a, w),
+        ),
+        "euler_singularity": (lambda a: rj.euler_singularity(a, "XYZ"), (a,)),
+        "unwrap_euler": (lambda a: rj.unwrap_euler(a, "ZYX"), (a,)),
+        "quaternion_derivative": (rj.quaternion_derivative, (q, w)),
+        "quaternion_derivative_to_angular_velocity": (
+            rj.quaternion_derivative_to_angular_velocity,
+            (q, q[::-1]),
+        ),
+        "matrix_derivative_to_angular_velocity": (
+            lambda r, d: rj.matrix_derivative_to_angular_velocity(r, d, frame="world"),
+            (r, r[::-1]),
+        ),
+        "angular_velocity_to_matrix_derivative": (rj.angular_velocity_to_matrix_derivative, (r, w)),
+        "integrate_angular_velocity": (
+            lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="rk4"),
+            (q, w),
+        ),
+        "integrate_angular_velocity_samples": (
+            lambda q, w: rj.integrate_angular_velocity_samples(q, w[:4, None], 0.01),
+            (q, w),
+        ),
+        "unwrap_quaternion": (rj.unwrap_quaternion, (q,)),
+        "euler_accelerations_to_angular_acceleration": (
+            lambda a, w: rj.euler_accelerations_to_angular_acceleration(a, w, w[::-1], "ZYX"),
+            (a, w),
+        ),
+        "angular_acceleration_to_euler_accelerations": (
+            lambda a, w: rj.angular_acceleration_to_euler_accelerations(
+                a, w, w[::-1], "ZYX", damping=0.1
+            ),
+            (a, w),
+        ),
+        "partition_coordinates": (lambda r: rj.partition_coordinates(r[:, :2]).influence, (r,)),
+        # the Rotation class and the functions it added
+        "quaternion_to_mrp": (rj.quaternion_to_mrp, (q,)),
+        "mrp_to_quaternion": (rj.mrp_to_quaternion, (w,)),
+        "quaternion_canonical": (rj.quaternion_canonical, (q,)),
+        "quaternion_power": (lambda q: rj.quaternion_power(q, 0.3), (q,)),
+        "quaternion_reduce": (
+            lambda q: rj.quaternion_reduce(q, rj.rotation_group("O", dtype=q.dtype))[0],
+            (q,),
+        ),
+        "rotation_group": (lambda q: rj.rotation_group("I", dtype=q.dtype), (q,)),
+        # orthonormal vector sets: the sensitivity is ill-conditioned where the singular values
+        # of B are (1/zeta), which is the data's conditioning, not the function's precision
+        "wahba_sensitivity": (
+            lambda r: rj.wahba_sensitivity(r, np.broadcast_to(np.eye(3, dtype=r.dtype), r.shape)),
+            (r,),
+        ),
+        "davenport_to_quaternion": (
+            lambda a: rj.davenport_to_quaternion(np.eye(3, dtype=a.dtype)[[0, 2, 0]], a),
+            (a,),
+        ),
+        "quaternion_to_davenport": (
+            lambda q: rj.quaternion_to_davenport(q, np.asarray(_OBLIQUE, q.dtype)),
+            (q,),
+        ),
+        "Rotation": (lambda q: rj.Rotation.from_quat(q).as_euler("XYZ"), (q,)),
+        "Slerp": (
+            lambda q: rj.Slerp(np.arange(8, dtype=q.dtype), rj.Rotation.from_quat(q[:8]))(
+                np.asarray(2.5, q.dtype)
+            ).as_matrix(),
+            (q,),
+        ),
+        "RotationSpline": (
+            lambda q: rj.RotationSpline(np.arange(8, dtype=q.dtype), rj.Rotation.from_quat(q[:8]))(
+                np.linspace(0, 7, 15, dtype=q.dtype), 1
+            ),
+            (q,),
+        ),
+    }
+
+
+def public_inputs(n, dtype):
+    """The inputs of :func:`every_public` for ``n`` random rotations (seed 21), in ``dtype``:
+    quaternions, their matrices, rotation vectors and ZYX angles."""
+    q = random_quaternions(n, seed=21)
+    derived = rj.quaternion_to_matrix(q), rj.quaternion_to_rotvec(q)
+    derived += (rj.quaternion_to_euler(q, "ZYX"),)
+    return [np.asarray(x).astype(dtype) for x in (q, *derived)]
 
 
 # --- hypothesis strategies -----------------------------------------------------------------
@@ -192,3 +331,103 @@ def mp_matrix_to_quaternion(R, dps=40):
         if q[3] < 0:
             q = [-c for c in q]
         return [float(c) for c in q], q
+
+
+# --- trouble-seeking batches (fuzzing) ---------------------------------------------------------
+
+# Input scales every function must handle today, as exponents of two: about 1e-10..1e10 in
+# float64 and 1e-6..1e6 in float32. (The full finite range is tested per function elsewhere.)
+SCALE_EXP = {np.float32: 20, np.float64: 33}
+QUAT_KINDS = ("generic", "identity", "near_identity", "half_turn", "near_half_turn", "tie",
+              "lock", "near_lock", "tiny_vector")  # fmt: skip
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def trouble_quaternions(kinds, rng, seq="ZYX", tiny_exp=(-150, -20)):
+    """Unit quaternions (float64, scalar last), one per entry of ``kinds`` (see
+    :data:`QUAT_KINDS`): exactly at and near the identity and 180 degrees, component ties
+    (equal magnitudes, as where the largest-component branch switches), exactly at and within
+    1e-9 (relative) of gimbal lock of ``seq``, and vector parts of ``10^tiny_exp``."""
+    n = len(kinds)
+    q = _unit(rng.normal(size=(n, 4)))
+    tiny = 10.0 ** rng.uniform(-12, -5, size=(n, 1))
+    for i, kind in enumerate(kinds):
+        if kind == "identity":
+            q[i] = [0, 0, 0, 1]
+        elif kind == "near_identity":
+            q[i] = _unit(np.append(tiny[i] * q[i, :3], 1.0))
+        elif kind == "half_turn":
+            q[i] = np.append(_unit(q[i, :3]), 0.0)
+        elif kind == "near_half_turn":
+            q[i] = _unit(np.append(q[i, :3], tiny[i]))
+        elif kind == "tie":
+            signs = rng.choice([-1.0, 1.0], size=4)
+            mask = rng.permutation([1.0, 1.0, 1.0, 0.0] if rng.random() < 0.5 else [1.0] * 4)
+            q[i] = _unit(signs * np.where(mask > 0, 1.0, rng.uniform(0.1, 0.9)))
+        elif kind in ("lock", "near_lock"):
+            a = rng.uniform(-np.pi, np.pi, size=3)
+            a[1] = lock_middles(seq)[rng.integers(2)]
+            if kind == "near_lock":
+                a[1] += tiny[i, 0] * 1e-4 * rng.choice([-1.0, 1.0])
+            q[i] = mp_euler_quaternion(a, seq)
+        elif kind == "tiny_vector":
+            q[i] = _unit(np.append(10.0 ** rng.uniform(*tiny_exp) * q[i, :3], 1.0))
+    return q
+
+
+def mp_euler_quaternion(angles, seq):
+    """Scalar-last quaternion of Euler angles by Hamilton products of elementary quaternions
+    in float64 numpy (an independent construction, not rotjax's)."""
+    from rotjax._euler import parse_seq
+
+    axes, intrinsic = parse_seq(seq)
+    qs = []
+    for ax, a in zip(axes, angles, strict=True):
+        e = np.zeros(4)
+        e[ax], e[3] = np.sin(a / 2), np.cos(a / 2)
+        qs.append(e)
+    if not intrinsic:
+        qs = qs[::-1]
+    out = qs[0]
+    for e in qs[1:]:
+        out = _hamilton(out, e)
+    return out
+
+
+def _hamilton(p, q):
+    (px, py, pz, pw), (qx, qy, qz, qw) = p, q
+    return np.array(
+        [
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+            pw * qw - px * qx - py * qy - pz * qz,
+        ]
+    )
+
+
+@st.composite
+def trouble_batches(draw, dtype, n=64):
+    """A batch of ``n`` troubled rotations in ``dtype``, as the four inputs of
+    :func:`every_public`: quaternions (not unit: random power-of-two-and-odd scales over
+    :data:`SCALE_EXP`, random signs), their matrices with noise of up to 1e-3 (not orthogonal)
+    and scaled, rotation vectors (angles at and near 0 and pi) and ZYX angles (some at and
+    near gimbal lock); plus the unit quaternions in float64 for reference."""
+    kinds = draw(st.lists(st.sampled_from(QUAT_KINDS), min_size=n, max_size=n))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    # vector parts whose square is still a normal number
+    unit = trouble_quaternions(
+        kinds, rng, tiny_exp=(-18, -6) if dtype == np.float32 else (-150, -20)
+    )
+    k = SCALE_EXP[dtype]
+    scale = 2.0 ** rng.integers(-k, k + 1, size=(n, 1)) * rng.uniform(0.5, 1.5, size=(n, 1))
+    q = unit * scale * rng.choice([-1.0, 1.0], size=(n, 1))
+    R = np.asarray(rj.quaternion_to_matrix(unit))
+    noise = rng.normal(size=(n, 3, 3)) * 10.0 ** rng.uniform(-16, -3, size=(n, 1, 1))
+    R_noisy = (R + noise * (rng.random((n, 1, 1)) < 0.5)) * scale[:, :, None]
+    w = np.asarray(rj.quaternion_to_rotvec(unit))
+    a = np.asarray(rj.quaternion_to_euler(unit, "ZYX"))
+    return [x.astype(dtype) for x in (q, R_noisy, w, a)], unit

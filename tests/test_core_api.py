@@ -1,10 +1,22 @@
 """API contract: broadcasting, jit/vmap, dtypes, scalar_first, and bad input."""
 
+import inspect
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import BATCH_SHAPES, DTYPES, assert_close, assert_same_rotation, random_quaternions
+from helpers import (
+    BATCH_SHAPES,
+    DTYPES,
+    SET_AXIS,
+    assert_close,
+    assert_same_rotation,
+    every_public,
+    public_inputs,
+    random_quaternions,
+)
+from jax.test_util import check_grads
 
 import rotjax as rj
 
@@ -204,7 +216,7 @@ def test_non_unit_quaternions_are_normalised():
 
 
 @pytest.mark.parametrize(
-    "seq", ["xyx ", "XYx", "XXY", "xyy", "abc", "12", "1234", "313a", "113", "404", "", 123]
+    "seq", ["xyx ", "XYx", "XXY", "xyy", "abc", "12", "1234", "313a", "113", "404", ""]
 )
 def test_bad_sequence_raises_listing_valid_forms(seq):
     with pytest.raises(ValueError, match="uppercase for intrinsic") as info:
@@ -286,139 +298,8 @@ def test_import_does_no_jax_work():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
-def _every_public(q, r, w, a):
-    """One call of every public function (name -> (function, inputs)), built from ``n``
-    quaternions ``q``, their matrices ``r``, rotation vectors ``w`` and ZYX angles ``a``."""
-    n = len(q)
-    # quaternions near q[0], of both signs and not unit: a mean that is well conditioned (the
-    # mean of uniformly random rotations is not: its 4x4 scatter matrix has close eigenvalues)
-    cluster = (q[0] + q / 5) * np.where(np.arange(n) % 2 == 0, 1, -1).astype(q.dtype)[:, None]
-    return {
-        "quaternion_to_matrix": (rj.quaternion_to_matrix, (q,)),
-        "matrix_to_quaternion": (lambda r: rj.matrix_to_quaternion(r, method="optimal"), (r,)),
-        "quaternion_to_rotvec": (rj.quaternion_to_rotvec, (q,)),
-        "rotvec_to_quaternion": (rj.rotvec_to_quaternion, (w,)),
-        "rotvec_to_matrix": (rj.rotvec_to_matrix, (w,)),
-        "matrix_to_rotvec": (rj.matrix_to_rotvec, (r,)),
-        "quaternion_to_axis_angle": (lambda q: rj.quaternion_to_axis_angle(q)[0], (q,)),
-        "axis_angle_to_quaternion": (rj.axis_angle_to_quaternion, (w, a[:, 0])),
-        "quaternion_to_euler": (lambda q: rj.quaternion_to_euler(q, "ZYX"), (q,)),
-        "matrix_to_euler": (lambda r: rj.matrix_to_euler(r, "zxz"), (r,)),
-        "euler_to_matrix": (lambda a: rj.euler_to_matrix(a, "ZYX"), (a,)),
-        "euler_to_quaternion": (lambda a: rj.euler_to_quaternion(a, "313"), (a,)),
-        "quaternion_normalize": (rj.quaternion_normalize, (q,)),
-        "quaternion_conjugate": (rj.quaternion_conjugate, (q,)),
-        "quaternion_inverse": (rj.quaternion_inverse, (q,)),
-        "quaternion_multiply": (rj.quaternion_multiply, (q, q[::-1])),
-        "quaternion_apply": (rj.quaternion_apply, (q, w)),
-        "relative_rotation": (rj.relative_rotation, (q, q[::-1])),
-        "rotation_angle": (rj.rotation_angle, (q,)),
-        "angle_between": (rj.angle_between, (q, q[::-1])),
-        "slerp": (lambda p, q: rj.slerp(p, q, 0.3), (q, q[::-1])),
-        "quaternion_mean": (rj.quaternion_mean, (cluster,)),
-        "align_vectors": (rj.align_vectors, (w, a)),
-        "align_vectors q-method": (lambda a, b: rj.align_vectors(a, b, method="q-method"), (w, a)),
-        "chordal_distance": (rj.chordal_distance, (r, r[::-1])),
-        "geodesic_distance": (rj.geodesic_distance, (r, r[::-1])),
-        "matrix_to_sixd": (rj.matrix_to_sixd, (r,)),
-        "sixd_to_matrix": (lambda x: rj.sixd_to_matrix(x), (r[:, :2].reshape(n, 6),)),
-        "nined_to_matrix": (rj.nined_to_matrix, (r.reshape(n, 9),)),
-        "euler_rate_matrix": (lambda a: rj.euler_rate_matrix(a, "ZXZ", frame="world"), (a,)),
-        "euler_rates_to_angular_velocity": (
-            lambda a, w: rj.euler_rates_to_angular_velocity(a, w, "ZYX"),
-            (a, w),
-        ),
-        "angular_velocity_to_euler_rates": (
-            lambda a, w: rj.angular_velocity_to_euler_rates(a, w, "ZYX", damping=0.1),
-            (a, w),
-        ),
-        "euler_singularity": (lambda a: rj.euler_singularity(a, "XYZ"), (a,)),
-        "unwrap_euler": (lambda a: rj.unwrap_euler(a, "ZYX"), (a,)),
-        "quaternion_derivative": (rj.quaternion_derivative, (q, w)),
-        "quaternion_derivative_to_angular_velocity": (
-            rj.quaternion_derivative_to_angular_velocity,
-            (q, q[::-1]),
-        ),
-        "matrix_derivative_to_angular_velocity": (
-            lambda r, d: rj.matrix_derivative_to_angular_velocity(r, d, frame="world"),
-            (r, r[::-1]),
-        ),
-        "angular_velocity_to_matrix_derivative": (rj.angular_velocity_to_matrix_derivative, (r, w)),
-        "integrate_angular_velocity": (
-            lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="rk4"),
-            (q, w),
-        ),
-        "integrate_angular_velocity_samples": (
-            lambda q, w: rj.integrate_angular_velocity_samples(q, w[:4, None], 0.01),
-            (q, w),
-        ),
-        "unwrap_quaternion": (rj.unwrap_quaternion, (q,)),
-        "euler_accelerations_to_angular_acceleration": (
-            lambda a, w: rj.euler_accelerations_to_angular_acceleration(a, w, w[::-1], "ZYX"),
-            (a, w),
-        ),
-        "angular_acceleration_to_euler_accelerations": (
-            lambda a, w: rj.angular_acceleration_to_euler_accelerations(
-                a, w, w[::-1], "ZYX", damping=0.1
-            ),
-            (a, w),
-        ),
-        "partition_coordinates": (lambda r: rj.partition_coordinates(r[:, :2]).influence, (r,)),
-        # the Rotation class and the functions it added
-        "quaternion_to_mrp": (rj.quaternion_to_mrp, (q,)),
-        "mrp_to_quaternion": (rj.mrp_to_quaternion, (w,)),
-        "quaternion_canonical": (rj.quaternion_canonical, (q,)),
-        "quaternion_power": (lambda q: rj.quaternion_power(q, 0.3), (q,)),
-        "quaternion_reduce": (
-            lambda q: rj.quaternion_reduce(q, rj.rotation_group("O", dtype=q.dtype))[0],
-            (q,),
-        ),
-        "rotation_group": (lambda q: rj.rotation_group("I", dtype=q.dtype), (q,)),
-        # orthonormal vector sets: the sensitivity is ill-conditioned where the singular values
-        # of B are (1/zeta), which is the data's conditioning, not the function's precision
-        "wahba_sensitivity": (
-            lambda r: rj.wahba_sensitivity(r, np.broadcast_to(np.eye(3, dtype=r.dtype), r.shape)),
-            (r,),
-        ),
-        "davenport_to_quaternion": (
-            lambda a: rj.davenport_to_quaternion(np.eye(3, dtype=a.dtype)[[0, 2, 0]], a),
-            (a,),
-        ),
-        "quaternion_to_davenport": (
-            lambda q: rj.quaternion_to_davenport(q, np.asarray(_OBLIQUE, q.dtype)),
-            (q,),
-        ),
-        "Rotation": (lambda q: rj.Rotation.from_quat(q).as_euler("XYZ"), (q,)),
-        "Slerp": (
-            lambda q: rj.Slerp(np.arange(8, dtype=q.dtype), rj.Rotation.from_quat(q[:8]))(
-                np.asarray(2.5, q.dtype)
-            ).as_matrix(),
-            (q,),
-        ),
-        "RotationSpline": (
-            lambda q: rj.RotationSpline(np.arange(8, dtype=q.dtype), rj.Rotation.from_quat(q[:8]))(
-                np.linspace(0, 7, 15, dtype=q.dtype), 1
-            ),
-            (q,),
-        ),
-    }
-
-
-# Davenport axes with the first and last 2 rad apart (consecutive ones orthogonal).
-_OBLIQUE = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [np.cos(2.0), 0.0, np.sin(2.0)]]
-
-
-def _float32(n):
-    """The inputs of :func:`_every_public` for ``n`` random rotations (the first 64 are ``Q``),
-    rounded to float32."""
-    q = random_quaternions(n, seed=21)
-    derived = rj.quaternion_to_matrix(q), rj.quaternion_to_rotvec(q)
-    derived += (rj.quaternion_to_euler(q, "ZYX"),)
-    return [np.asarray(x).astype(np.float32) for x in (q, *derived)]
-
-
-EVERY_PUBLIC = _every_public(*_float32(8))
-EVERY_PUBLIC_1024 = _every_public(*_float32(1024))
+EVERY_PUBLIC = every_public(*public_inputs(8, np.float32))
+EVERY_PUBLIC_1024 = every_public(*public_inputs(1024, np.float32))
 
 
 @pytest.mark.parametrize("name", sorted(EVERY_PUBLIC))
@@ -476,3 +357,202 @@ def test_precision_check_sees_matrix_products():
     for name in ("quaternion_mean", "align_vectors", "nined_to_matrix", "geodesic_distance"):
         f, args = EVERY_PUBLIC[name]
         assert _dot_generals(f, args), name
+
+
+# --- shapes and arguments, for every public function -----------------------------------------
+
+EVERY_PUBLIC_64 = every_public(*public_inputs(64, np.float64))
+
+
+def _batched(name, args, batch):
+    """``args`` (flat batches of 64) reshaped to the leading shape ``batch`` (plus a set axis of
+    3 for the functions that take one)."""
+    lead = batch + ((3,) if name in SET_AXIS else ())
+    n = int(np.prod(lead, dtype=int))
+    return [np.asarray(x)[:n].reshape((*lead, *np.shape(x)[1:])) for x in args]
+
+
+def _loss(f):
+    return lambda *a: sum(jnp.sum(o) for o in jax.tree.leaves(f(*a)))
+
+
+@pytest.mark.parametrize("batch", [(), (1,), (2,), (3, 1, 2)], ids=str)
+@pytest.mark.parametrize("name", sorted(EVERY_PUBLIC_64))
+def test_no_implicit_rank_promotion(name, batch):
+    """Forward and gradient trace under ``jax_numpy_rank_promotion="raise"`` (no internal
+    ``(4,)`` constant broadcast against a batch), and the output keeps the batch shape. Tracing
+    is enough to raise, so nothing is compiled."""
+    f, args = EVERY_PUBLIC_64[name]
+    xs = _batched(name, args, batch)
+    with jax.numpy_rank_promotion("raise"):
+        out = jax.eval_shape(f, *xs)
+        grads = jax.eval_shape(jax.grad(_loss(f), argnums=tuple(range(len(xs)))), *xs)
+    for o in jax.tree.leaves(out):
+        assert o.shape[: len(batch)] == batch, (o.shape, batch)
+    assert [g.shape for g in grads] == [x.shape for x in xs]
+
+
+MULTI_ARG = sorted(n for n, (_, args) in EVERY_PUBLIC_64.items() if len(args) > 1)
+
+
+@pytest.mark.parametrize("arg", [1, 0])
+@pytest.mark.parametrize("name", MULTI_ARG)
+def test_leading_shapes_that_do_not_broadcast_raise_naming_both(name, arg):
+    f, args = EVERY_PUBLIC_64[name]
+    xs = _batched(name, args, (2,))
+    xs[arg] = _batched(name, [args[arg]], (3,))[0]
+    with pytest.raises(ValueError, match=r"do not broadcast: .*\(2,.*\(3,|\(3,.*\(2,"):
+        f(*xs)
+
+
+def _call_with(name, **options):
+    """Call the public function ``name`` on its inputs with keyword ``options`` (its other
+    static arguments as in :func:`every_public`'s call, or defaults)."""
+    fun = getattr(rj, name)
+    _, args = EVERY_PUBLIC_64[name]
+    params = inspect.signature(fun).parameters
+    if "seq" in params and "seq" not in options:
+        options["seq"] = "ZYX"
+    if name == "slerp":
+        args = (*args, 0.3)
+    elif name == "integrate_angular_velocity":
+        args = (*args, 0.01)
+    return fun(*args, **options)
+
+
+PUBLIC_PARAMS = {
+    n: inspect.signature(getattr(rj, n)).parameters
+    for n in dir(rj)
+    if not n.startswith("_") and callable(getattr(rj, n))
+}
+
+
+def _takers(option):
+    return sorted(n for n, p in PUBLIC_PARAMS.items() if option in p)
+
+
+@pytest.mark.parametrize("seq", [["x", "y", "z"], ("Z", "Y", "X"), None, b"ZYX", 123], ids=repr)
+@pytest.mark.parametrize("name", _takers("seq"))
+def test_seq_not_a_string_is_a_type_error(name, seq):
+    with pytest.raises(TypeError, match=r"seq must be a str"):
+        _call_with(name, seq=seq)
+
+
+@pytest.mark.parametrize("value", ["yes", 1, None, 0.0], ids=repr)
+@pytest.mark.parametrize("option", ["degrees", "scalar_first"])
+def test_flags_must_be_bool(option, value):
+    for name in _takers(option):
+        with pytest.raises(TypeError, match=rf"{option} must be a bool"):
+            _call_with(name, **{option: value})
+
+
+def test_numpy_bools_are_accepted_as_flags():
+    out = rj.quaternion_to_euler(Q, "ZYX", degrees=np.bool_(True), scalar_first=np.False_)
+    assert_close(out, np.rad2deg(A), rtol=1e-13, atol=1e-12)
+
+
+@pytest.mark.parametrize("option", ["method", "frame"])
+def test_unknown_method_or_frame_lists_the_valid_ones(option):
+    valid = {"method": None, "frame": ("body", "world")}[option]
+    for name in _takers(option):
+        default = PUBLIC_PARAMS[name][option].default
+        with pytest.raises(ValueError, match=rf"{option}.*{default!r}.*'nope'") as info:
+            _call_with(name, **{option: "nope"})
+        for v in valid or ():
+            assert repr(v) in str(info.value), (name, str(info.value))
+        with pytest.raises(TypeError, match=rf"{option} must be a str"):
+            _call_with(name, **{option: 1})
+
+
+@pytest.mark.parametrize("axis", [np.int64(1), np.int32(-2), 1], ids=repr)
+def test_integer_like_axis_is_accepted(axis):
+    a = np.stack([A[:5], A[5:10]])  # (2, 5, 3): time on axis 1
+    want = rj.unwrap_euler(np.swapaxes(a, 0, 1), "ZYX", axis=0)
+    assert_close(rj.unwrap_euler(a, "ZYX", axis=axis), np.swapaxes(want, 0, 1), atol=0)
+
+
+@pytest.mark.parametrize("axis", [1.0, "0", True, None], ids=repr)
+def test_non_integer_axis_is_a_type_error(axis):
+    with pytest.raises(TypeError, match="axis must be an int"):
+        rj.unwrap_euler(A[:5], "ZYX", axis=axis)
+
+
+@pytest.mark.parametrize("arg", [0, 1])
+@pytest.mark.parametrize("name", sorted(EVERY_PUBLIC_64))
+def test_complex_input_is_a_type_error(name, arg):
+    f, args = EVERY_PUBLIC_64[name]
+    if arg >= len(args):
+        arg = 0
+    xs = list(args)
+    xs[arg] = xs[arg] + 0j
+    with pytest.raises(TypeError, match="must be real"):
+        f(*xs)
+    with pytest.raises(TypeError, match="must be real"):
+        jax.jit(f)(*xs)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf], ids=str)
+@pytest.mark.parametrize("name", sorted(EVERY_PUBLIC_64))
+def test_nan_and_inf_stay_in_their_batch_element(name, bad):
+    """One NaN or infinite component in batch element 1 (of 4) leaves elements 0, 2 and 3
+    bit-identical to the clean call; element 1's output is not all finite (a bad input must
+    not give a valid-looking result)."""
+    f, args = EVERY_PUBLIC_64[name]
+    if name == "unwrap_euler":  # batch first, time second (locality in time: test_kinematics)
+        f = lambda a: rj.unwrap_euler(a, "ZYX", axis=1)  # noqa: E731
+    xs = _batched(name, args, (4,))
+    clean = jax.tree.leaves(f(*xs))
+    for arg in range(len(xs)):
+        ys = [x.copy() for x in xs]
+        ys[arg][(1,) + (0,) * (ys[arg].ndim - 1)] = bad
+        out = jax.tree.leaves(f(*ys))
+        for o, c in zip(out, clean, strict=True):
+            o, c = np.asarray(o), np.asarray(c)
+            keep = [0, 2, 3]
+            np.testing.assert_array_equal(o[keep], c[keep], err_msg=f"{name}, argument {arg}")
+        assert not all(np.all(np.isfinite(np.asarray(o)[1])) for o in out), (name, arg, out)
+
+
+# --- sixd_to_matrix at every finite scale ------------------------------------------------------
+
+SIXD = np.concatenate([R[:16, :, 0], R[:16, :, 1] + 0.3 * R[:16, :, 2]], axis=-1)  # a2 not unit
+
+
+@pytest.mark.parametrize(
+    "dtype,exps",
+    [(np.float32, [-30, -20, -5, 0, 7, 20, 30]), (np.float64, [-300, -155, 0, 160, 300])],
+)
+def test_sixd_to_matrix_is_scale_invariant_with_finite_gradients(dtype, exps):
+    """Each half of the 6D vector scaled by 10^k (independently) gives the same matrix within
+    2 eps, and the gradient scales as 1/10^k (the map is homogeneous of degree 0 in each
+    half), finite. Before the power-of-two prescaling, float32 gave zeros at 1e20 and NaN at
+    1e-20."""
+    eps = np.finfo(dtype).eps
+    x = SIXD.astype(dtype)
+    ref = np.asarray(rj.sixd_to_matrix(x), np.float64)
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=ref.shape).astype(dtype)  # a random linear functional of the output
+    grad = jax.jit(jax.grad(lambda x: jnp.sum(rj.sixd_to_matrix(x) * w)))
+    g_ref = np.asarray(grad(x), np.float64)
+    for k1 in exps:
+        for k2 in (exps[0], 0, exps[-1]):
+            s = np.array([10.0**k1] * 3 + [10.0**k2] * 3)
+            xs = (x.astype(np.float64) * s).astype(dtype)
+            out = np.asarray(rj.sixd_to_matrix(xs), np.float64)
+            assert np.abs(out - ref).max() <= 2 * eps, (k1, k2, np.abs(out - ref).max() / eps)
+            g = np.asarray(grad(xs), np.float64) * s
+            assert np.all(np.isfinite(g)), (k1, k2)
+            assert np.abs(g - g_ref).max() <= 64 * eps * np.abs(g_ref).max(), (k1, k2)
+
+
+def test_sixd_to_matrix_gradient_is_the_derivative():
+    check_grads(rj.sixd_to_matrix, (SIXD[:4],), order=2, modes=["fwd", "rev"])
+    check_grads(rj.sixd_to_matrix, (1e-200 * SIXD[:4],), order=1, eps=1e-206)
+
+
+@pytest.mark.parametrize("bad", [0.0, np.inf, np.nan], ids=str)
+def test_sixd_to_matrix_nan_for_no_rotation(bad):
+    x = SIXD[:2].copy()
+    x[0, :3] = bad
+    out = np.asarray(rj.sixd_to_matrix(x))
+    assert np.all(np.isnan(out[0])) and np.all(np.isfinite(out[1]))
