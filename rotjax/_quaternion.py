@@ -1,8 +1,9 @@
 """Quaternion algebra and the quaternion -> matrix map.
 
 Internally every quaternion is scalar last, ``(x, y, z, w)``; ``scalar_first=True`` reorders at the
-boundary. Functions that interpret a quaternion as a rotation normalise it; the algebraic
-functions (product, conjugate) do not, because kinematics needs them on non-unit quaternions.
+boundary. Functions that interpret a quaternion as a rotation normalise it, at any finite non-zero
+scale (an exact power-of-two prescaling, :func:`_prescaled`); the algebraic functions (product,
+conjugate) do not, because kinematics needs them on non-unit quaternions.
 """
 
 from __future__ import annotations
@@ -14,10 +15,12 @@ from ._numerics import (
     check_shape,
     cross,
     from_scalar_last,
+    max_abs,
     public,
     safe_atan2,
-    safe_norm,
+    scaled_norm,
     to_scalar_last,
+    unit_scale,
 )
 
 
@@ -33,6 +36,16 @@ def _prep2(p, q, scalar_first, names=("p", "q")):
     check_shape(p, (4,), names[0])
     check_shape(q, (4,), names[1])
     return to_scalar_last(p, scalar_first), to_scalar_last(q, scalar_first), dt
+
+
+def _prescaled(q):
+    """``q`` times a power of two that brings its largest component into ``[0.5, 2)`` (exact;
+    1 for a unit quaternion), so that squared norms and products neither overflow nor
+    underflow; NaN where a component is infinite or NaN (not a rotation). A function of the
+    rotation gives the same result for ``q`` and for this."""
+    big = max_abs(*jnp.moveaxis(q, -1, 0))
+    s = unit_scale(big)[..., None]
+    return jnp.where(jnp.isfinite(big)[..., None], q * s, jnp.nan)
 
 
 def _multiply(p, q):
@@ -79,11 +92,15 @@ def _to_matrix(q):
 
 
 def _angle(q):
-    """Rotation angle in [0, pi] of a scalar-last quaternion of any norm (NaN for zero)."""
+    """Rotation angle in [0, pi] of a scalar-last quaternion of any finite norm (NaN for zero
+    or a non-finite component)."""
+    q = _prescaled(q)  # |w| and n of order 1: the derivative of atan2 cannot underflow
     w = jnp.abs(q[..., 3])
-    # NaN for the zero quaternion: atan2(0, 0) = 0 would pass for the identity.
-    w = jnp.where(jnp.sum(q * q, axis=-1) == 0, jnp.nan, w)
-    return 2 * safe_atan2(safe_norm(q[..., :3]), w)
+    n = scaled_norm(q[..., :3])  # 1e-160 stays 1e-160: atan2 is a ratio, scale-free
+    # NaN for the zero quaternion: atan2(0, 0) = 0 would pass for the identity; and for an
+    # infinite component, where atan2 would return a finite angle.
+    bad = ((n == 0) & (w == 0)) | ~jnp.isfinite(n + w)
+    return jnp.where(bad, jnp.nan, 2 * safe_atan2(n, w))
 
 
 @public
@@ -100,7 +117,7 @@ def quaternion_to_matrix(q, scalar_first: bool = False):
         ``-q`` give the same matrix.
     """
     q, dt = _prep(q, scalar_first)
-    return _to_matrix(q).astype(dt)
+    return _to_matrix(_prescaled(q)).astype(dt)
 
 
 @public
@@ -163,7 +180,7 @@ def quaternion_normalize(q, scalar_first: bool = False):
         ``(..., 4)`` unit quaternion, in the same layout.
     """
     q, dt = _prep(q, scalar_first)
-    return from_scalar_last(_normalize(q), scalar_first).astype(dt)
+    return from_scalar_last(_normalize(_prescaled(q)), scalar_first).astype(dt)
 
 
 @public
@@ -181,7 +198,7 @@ def quaternion_apply(q, v, scalar_first: bool = False):
     (q, v), dt = as_float(q, v)
     check_shape(q, (4,), "q")
     check_shape(v, (3,), "v")
-    q = to_scalar_last(q, scalar_first)
+    q = _prescaled(to_scalar_last(q, scalar_first))
     qv, w = q[..., :3], q[..., 3:]
     s = 2 / jnp.sum(q * q, axis=-1, keepdims=True)
     t = cross(qv, v)
@@ -207,7 +224,7 @@ def relative_rotation(q_a, q_b, scalar_first: bool = False):
         ``(..., 4)`` unit quaternion of the relative rotation (sign as produced by the product).
     """
     qa, qb, dt = _prep2(q_a, q_b, scalar_first, ("q_a", "q_b"))
-    rel = _normalize(_multiply(_conjugate(qa), qb))
+    rel = _normalize(_multiply(_conjugate(_prescaled(qa)), _prescaled(qb)))
     return from_scalar_last(rel, scalar_first).astype(dt)
 
 
@@ -249,4 +266,4 @@ def angle_between(p, q, scalar_first: bool = False):
         minimum of the cone). See :func:`rotation_angle`.
     """
     p, q, dt = _prep2(p, q, scalar_first)
-    return _angle(_multiply(_conjugate(p), q)).astype(dt)
+    return _angle(_multiply(_conjugate(_prescaled(p)), _prescaled(q))).astype(dt)

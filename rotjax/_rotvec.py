@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from ._matrix import _from_matrix
@@ -12,11 +13,12 @@ from ._numerics import (
     from_scalar_last,
     hat,
     matmul,
+    pow2_scale,
     public,
     safe_norm,
     to_scalar_last,
 )
-from ._quaternion import _angle
+from ._quaternion import _angle, _prescaled
 
 
 def _small(x2):
@@ -39,7 +41,9 @@ def _rotvec_to_quat(v):
 
 
 def _quat_to_rotvec(q):
-    """Logarithm map of a scalar-last quaternion of any non-zero norm; angle in [0, pi]."""
+    """Logarithm map of a scalar-last quaternion of any finite non-zero norm; angle in
+    [0, pi]."""
+    q = _prescaled(q)
     q = jnp.where(q[..., 3:] < 0, -q, q)  # w >= 0 gives the angle in [0, pi]
     qv, w = q[..., :3], q[..., 3]
     n2 = jnp.sum(qv * qv, axis=-1)
@@ -201,16 +205,20 @@ def quaternion_to_axis_angle(q, degrees: bool = False, scalar_first: bool = Fals
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
-    q = to_scalar_last(q, scalar_first)
+    q = _prescaled(to_scalar_last(q, scalar_first))
     q = jnp.where(q[..., 3:] < 0, -q, q)
     qv = q[..., :3]
+    # The vector part scaled on its own (a power of two), so that a tiny one (1e-160 next to
+    # w = 1) still gives its direction rather than underflowing to the identity's.
+    s, _ = pow2_scale(jax.lax.stop_gradient(jnp.max(jnp.abs(qv), axis=-1)))
+    qv = qv * s[..., None]
     n = safe_norm(qv)
     ident = (n == 0)[..., None]
     e_x = jnp.asarray([1.0, 0.0, 0.0], dtype=q.dtype)
     axis = jnp.where(ident, e_x, qv / jnp.where(ident, 1.0, n[..., None]))
-    # NaN (not a valid-looking identity) for the zero quaternion.
-    axis = jnp.where(jnp.sum(q * q, axis=-1, keepdims=True) == 0, jnp.nan, axis)
     angle = _angle(q)
+    # NaN (not a valid-looking identity) for the zero quaternion or a non-finite component.
+    axis = jnp.where(jnp.isnan(angle)[..., None], jnp.nan, axis)
     if degrees:
         angle = jnp.rad2deg(angle)
     return axis.astype(dt), angle.astype(dt)
