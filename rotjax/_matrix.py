@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._numerics import (
     as_float,
@@ -76,26 +78,30 @@ def _prescaled(R):
     s = unit_scale(max_abs(*r))
     f2 = sum((x * s) * (x * s) for x in r)  # a scalar sum, not jnp.sum: one fused loop
     ok = (f2 > 0) & jnp.isfinite(f2)
-    return jnp.where(ok[..., None, None], R * s[..., None, None], jnp.nan), jnp.where(
-        ok, f2, jnp.nan
-    )
+    R = jnp.where(ok[..., None, None], R * s[..., None, None], jnp.nan)
+    return R, jnp.where(ok, f2, jnp.nan), s
 
 
 def _scaled_k(R):
     """The columns of the homogeneous ``K`` (see :func:`_k4_columns`) of the prescaled ``R``,
     with ``t = |R|_F / sqrt(3)`` (1 for a rotation matrix, ``s`` for ``s`` times one), and the
     ``d`` terms. NaN throughout for a zero or non-finite ``R``."""
-    R, f2 = _prescaled(R)
+    R, f2, _ = _prescaled(R)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
     return _k4_columns(R, h * rsqrt(h))
+
+
+def _masks(diag):
+    """``(use_x, use_y, use_z)`` for :func:`_select`: the largest diagonal entry of ``K``."""
+    dx, dy, dz, dw = diag
+    return (dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw
 
 
 def _select_column(cols, diag):
     """The column of ``K`` with the largest diagonal entry, as four per-rotation arrays, and its
     squared norm, at least ``t^2 >= 1/12`` (the four diagonal entries of ``K`` sum to ``4 t``,
     so the largest is at least ``t``): no small divisor, and :func:`rsqrt`'s domain."""
-    dx, dy, dz, dw = diag
-    masks = ((dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw)
+    masks = _masks(diag)
     c = [_select(masks, [col[i] for col in cols]) for i in range(4)]
     return c, sum(x * x for x in c)
 
@@ -124,6 +130,7 @@ def _stack_last(v, scale):
     return jnp.moveaxis(jnp.stack(v, axis=0) * scale, 0, -1)
 
 
+@jax.custom_jvp
 def _shepperd(R):
     """Shepperd extraction, scalar last, ``w >= 0``: the selected column of ``K`` over its norm.
 
@@ -133,11 +140,58 @@ def _shepperd(R):
     single transposing loop that reads the matrix once. JAX differentiates this code itself:
     every operation has a finite derivative wherever it is reached (the divisor is at least
     ``t^2``), and at a switch of the selected column it is the derivative of the branch taken.
+    The rule below is that derivative, written for reverse mode (tested equal to JAX's).
     """
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
     return _stack_last(c, _hemisphere_scale(c, sq))
+
+
+def _dk_pattern():
+    """``P[a, b, k, j]``: the derivative of ``K[a, b]`` with respect to ``R[k, j]`` (``K`` is
+    affine in ``R``; read off :func:`_k4_columns` on unit matrices, in NumPy)."""
+    out = np.zeros((4, 4, 3, 3))
+    for k in range(3):
+        for j in range(3):
+            e = np.zeros((3, 3))
+            e[k, j] = 1.0
+            cols, _ = _k4_columns(e, 0.0)
+            out[:, :, k, j] = np.array(cols).T
+    return out
+
+
+_DK_PATTERN = _dk_pattern()
+
+
+@_shepperd.defjvp
+def _shepperd_jvp(primals, tangents):
+    # JAX's derivative of _shepperd, term by term: R1 = s R (s a constant power of two),
+    # t = h rsqrt(h) with h = |R1|^2 / 3, so dt = tau dh, tau = y (1 - h y^2 / 2), y = rsqrt(h)
+    # (rsqrt's rule); dc = dK e_i for the selected column i (the masks are constant);
+    # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc. dR enters only through
+    # u_a = sum(M_a * dR) with M_a = z s (dK[a, i] / dR + (2/3) tau R1 [a = i]), elementwise
+    # products whose transpose (reverse mode) is one loop writing the cotangent of R.
+    (R,), (dR,) = primals, tangents
+    R1, f2, s = _prescaled(R)
+    h = f2 / 3
+    y = rsqrt(h)
+    cols, diag = _k4_columns(R1, h * y)
+    use_x, use_y, use_z = _masks(diag)
+    sel = [use_x, ~use_x & use_y, ~use_x & ~use_y & use_z, ~use_x & ~use_y & ~use_z]
+    sel = [m.astype(R.dtype)[..., None, None] for m in sel]
+    c = [_select((use_x, use_y, use_z), [col[a] for col in cols]) for a in range(4)]
+    z = _hemisphere_scale(c, sum(x * x for x in c))
+    q = [x * z for x in c]
+    zs = (z * s)[..., None, None]
+    dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * R1
+    pat = _DK_PATTERN.astype(R.dtype)
+    u = []
+    for a in range(4):
+        m = sum(sel[b] * pat[a, b] for b in range(4)) + sel[a] * dt
+        u.append(jnp.sum((zs * m) * dR, axis=(-2, -1)))
+    qu = sum(q[a] * u[a] for a in range(4))
+    return _shepperd(R), jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
 
 
 def _signed_norm(c, sq):
@@ -192,7 +246,7 @@ def _from_matrix(R, method: str):
     if method == "markley":
         return _markley(R)
     if method == "optimal":
-        R, _ = _prescaled(R)
+        R, _, _ = _prescaled(R)
         cols, _ = _k4_columns(R)
         K = jnp.stack([jnp.stack(c, axis=-1) for c in cols], axis=-1)
         # Bar-Itzhack 2000: the top eigenvector of the symmetric K is the quaternion of the
