@@ -73,11 +73,10 @@ def _elementary(axis: int, angle):
 
 
 # --- a polynomial atan2 ----------------------------------------------------------------------
-# XLA:CPU's atan2 runs at about 10 M/s per core and dominated Euler extraction (three per
-# rotation). This branch-free version is measured 10x faster (``python -m rotjax bench``);
-# on 20,000 random pairs spanning six decades it is within 1.7 ulp (float32) / 2.0 ulp
-# (float64) of the correctly rounded value (XLA's: 1.2 / 1.0), which keeps the Euler backward
-# error within its bounds (tests/test_core_oracle.py, the benchmark's error columns).
+# XLA:CPU's atan2 dominated Euler extraction (three per rotation); this branch-free version
+# fuses into the surrounding loop (see the performance page). It is within about 2 ulp of the
+# correctly rounded value in both dtypes, which keeps the Euler backward error within its
+# bounds (tests/test_core_oracle.py).
 #
 # Reduction: t = min(|x|, |y|) / max(|x|, |y|) in [0, 1]; above tan(pi/8) it is mapped to
 # u = (t - 1) / (t + 1) (one division either way), so |u| <= tan(pi/8) and
@@ -299,11 +298,6 @@ def _quat_to_euler(q, seq):
     # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
     # The three atan2 run on per-rotation arrays and their results are stacked on the last
     # axis: XLA:CPU compiles the extraction to one loop (two for Tait-Bryan sequences).
-    # Stacking the three numerators and denominators first and running atan2 once on (..., 3)
-    # arrays gave the same bits in three loops (interleaved ad-hoc timings, 2^20 rotations:
-    # 1.4-2.2x slower on four sequences of both kinds). Stacking the results on a leading axis
-    # and moving it last made XLA:CPU emit a transposing loop that LLVM did not vectorize in
-    # float64.
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
@@ -483,11 +477,16 @@ def quaternion_to_euler(q, seq: str, degrees: bool = False, scalar_first: bool =
         float32) only the sum or difference of the outer angles is defined. The third angle
         is then returned as 0 and the first carries the whole rotation, like scipy.
 
+        *Scale.* ``q`` need not be unit: any finite non-zero scale gives the same angles (an
+        exact power-of-two prescaling); zero, infinite or NaN components give NaN.
+
         *Gradient rule.* Near lock the gradient is the true derivative (it grows like
-        1/distance). Exactly at lock the gradient is that of the branch that fixes the third
-        angle at 0: the first angle gets the derivative of the defined sum/difference, the third
-        angle gets 0, and the middle angle, which sits at a kink (the edge of its range), gets
-        0 (the minimum-norm subgradient). All are finite.
+        1/distance), finite at every distance down to the lock threshold (each factor is
+        scaled by its own power of two before it is squared). Exactly at lock the gradient is
+        that of the branch that fixes the third angle at 0: the first angle gets the derivative
+        of the defined sum/difference, the third angle gets 0, and the middle angle, which sits
+        at a kink (the edge of its range), gets 0 (the minimum-norm subgradient). All are
+        finite.
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
@@ -512,9 +511,12 @@ def matrix_to_euler(R, seq: str, degrees: bool = False):
         the behaviour at gimbal lock and the gradient rule.
 
     Note:
-        The derivative with respect to ``R`` is that of :func:`matrix_to_quaternion`'s
-        ``"shepperd"`` rule followed by :func:`quaternion_to_euler`'s: exact along SO(3); a
-        perturbation off SO(3) counts only through its component along the tangent space.
+        Computed as :func:`quaternion_to_euler` of :func:`matrix_to_quaternion`'s
+        ``"shepperd"`` quaternion: scale invariant (any ``s R``, ``s > 0``, from 1e-30 to 1e30
+        in float32, 1e-300 to 1e300 in float64), NaN for the zero matrix or a non-finite entry.
+        The gradient is the derivative of the function computed, in every 3x3 direction, on
+        and off SO(3) (see :func:`matrix_to_quaternion`), with the gimbal-lock rule of
+        :func:`quaternion_to_euler`.
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")

@@ -61,8 +61,8 @@ def _positive_w(q):
 def _select(masks, vals):
     """``vals[i]`` for the first true mask ``(use_x, use_y, use_z)``, else ``vals[3]``.
 
-    Nested ``jnp.where`` fuses into the surrounding XLA loop; an argmax + gather was measured
-    slower, and a one-hot product turns ``0 * inf`` into NaN.
+    Nested ``jnp.where`` fuses into the surrounding XLA loop (an argmax + gather does not), and
+    unlike a one-hot product it cannot turn ``0 * inf`` into NaN.
     """
     use_x, use_y, use_z = masks
     v = jnp.where(use_z, vals[2], vals[3])
@@ -290,27 +290,28 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
         sign is that of the selected component).
 
     Note:
-        No sqrt or division is applied to a small number: the selected column has norm at least
-        1 for a rotation matrix, so every method is finite and differentiable everywhere,
-        including the identity and every 180-degree rotation.
+        *Scale.* ``K`` is built homogeneous (its diagonal ``1 = |q|^2`` replaced by
+        ``t = |R|_F / sqrt(3)``, which adds ``(t - 1) I`` and changes no eigenvector), and
+        ``R`` is scaled by an exact power of two when its largest entry is outside
+        ``[0.5, 2)``: every method gives the same unit quaternion, to a few eps, for ``s R``
+        as for ``R``, for any ``s > 0`` from 1e-30 to 1e30 (float32) or 1e-300 to 1e300
+        (float64). A rotation matrix is not rescaled. The zero matrix, or any infinite or NaN
+        entry, gives NaN (in that batch element only).
 
-        *Gradients.* For ``"shepperd"`` the derivative is the tangent-space rule
-        ``dq = 1/2 q (x) (v, 0)`` with ``v = vee(R^T dR)`` (a ``jax.custom_jvp``): exact for
-        every perturbation that stays on SO(3), and for a perturbation off SO(3) it keeps only
-        its component along the tangent space, which at a rotation matrix equals the derivative
-        of the ``"optimal"`` quaternion. So the gradient of a loss with respect to a free 3x3
-        matrix is not that of the raw Shepperd formula (which would also react to scaling and
-        shear); compose with an explicit projection if that is what you need. For
-        ``"markley"`` the gradient is the exact derivative of the power step applied to the
-        Shepperd quaternion (with the rule above for the latter). At a rotation matrix this is
-        the true derivative of the returned quaternion along every direction, off SO(3) too
-        (there ``K = 4 q q^T`` annihilates the Shepperd step's share); for a matrix with noise
-        sigma it deviates from the true derivative by O(sigma): a median 0.45 sigma (relative,
-        random directions), against 2 sigma for the rule above, which would be the cheaper
-        choice. For
-        ``"optimal"`` the gradient is that of the top eigenvector (the power step does not
-        change it), finite while the top eigenvalue is simple (always, for matrices near a
-        rotation).
+        *Singular points.* No sqrt or division is applied to a small number: the selected
+        column has squared norm at least ``t^2``, so every method is finite and differentiable
+        at the identity and at every 180-degree rotation.
+
+        *Gradients.* ``jax.grad`` and ``jax.jvp`` give the derivative of the function computed,
+        in every 3x3 direction, on and off SO(3): a perturbation ``R @ S`` with ``S``
+        symmetric (scaling, shear) moves ``"shepperd"`` and ``"markley"`` as it moves their
+        formulas. Where the selected column switches (off SO(3) the result jumps there), it
+        is the derivative of the branch taken. ``"shepperd"`` has a hand-written rule for
+        reverse-mode speed, equal to JAX's derivative of its code (tested). For the derivative
+        of "the rotation nearest to this matrix", which ignores such perturbations to first
+        order, use ``"optimal"``: its gradient is that of the top eigenvector (the power step
+        does not change it), finite while the top eigenvalue is simple (always, for matrices
+        near a rotation).
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")

@@ -153,7 +153,8 @@ def matrix_to_rotvec(R, degrees: bool = False):
     Note:
         Going through :func:`matrix_to_quaternion` keeps full accuracy at 180 degrees, where
         ``acos((trace - 1) / 2)`` formulas lose half the digits and the axis from the
-        antisymmetric part vanishes.
+        antisymmetric part vanishes. Scale invariant and NaN for non-rotations like it, and the
+        gradient is the derivative of the function computed, off SO(3) too.
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
@@ -201,7 +202,10 @@ def quaternion_to_axis_angle(q, degrees: bool = False, scalar_first: bool = Fals
 
     Note:
         At the identity the axis is undefined; ``(1, 0, 0)`` is returned, with a zero gradient
-        (finite, by the double where). The angle uses atan2 (see :func:`rotation_angle`).
+        (finite, by the double where). A tiny but non-zero vector part (``1e-160`` next to
+        ``w = 1``) gives its own direction: it is scaled by a power of two before its norm is
+        taken. Any finite non-zero scale of ``q`` gives the same result. The angle uses atan2
+        (see :func:`rotation_angle`).
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
