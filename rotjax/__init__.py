@@ -1,4 +1,13 @@
-"""rotjax: 3-D rotation maths in JAX, branch-free and differentiable everywhere it can be."""
+"""rotjax: 3-D rotation maths in JAX, branch-free and differentiable everywhere it can be.
+
+Pure functions on arrays, named ``<source>_to_<target>`` over quaternions (scalar last
+``(x, y, z, w)``, Hamilton product), active rotation matrices (``v_world = R @ v_body``),
+rotation vectors, axis-angle pairs and Euler angles (scipy's sequences: ``"ZXZ"`` intrinsic,
+``"zxz"`` extrinsic); kinematics (``frame="body"`` or ``"world"``) and fitting. Leading batch
+dimensions broadcast; float32 and float64 are kept; every function works under ``jax.jit``,
+``jax.vmap`` and ``jax.grad``. The public functions are listed in ``__all__``; the conventions,
+gradient policy and guides are in the documentation (``docs/``).
+"""
 
 from ._euler import euler_to_matrix as euler_to_matrix
 from ._euler import euler_to_quaternion as euler_to_quaternion
@@ -46,3 +55,44 @@ from ._rotvec import rotvec_to_matrix as rotvec_to_matrix
 from ._rotvec import rotvec_to_quaternion as rotvec_to_quaternion
 
 __version__ = "0.1.0"
+
+__all__ = [
+    "align_vectors",
+    "angle_between",
+    "angular_velocity_to_euler_rates",
+    "angular_velocity_to_matrix_derivative",
+    "axis_angle_to_quaternion",
+    "chordal_distance",
+    "euler_rate_matrix",
+    "euler_rates_to_angular_velocity",
+    "euler_singularity",
+    "euler_to_matrix",
+    "euler_to_quaternion",
+    "geodesic_distance",
+    "integrate_angular_velocity",
+    "matrix_derivative_to_angular_velocity",
+    "matrix_to_euler",
+    "matrix_to_quaternion",
+    "matrix_to_rotvec",
+    "matrix_to_sixd",
+    "nined_to_matrix",
+    "quaternion_apply",
+    "quaternion_conjugate",
+    "quaternion_derivative",
+    "quaternion_derivative_to_angular_velocity",
+    "quaternion_inverse",
+    "quaternion_mean",
+    "quaternion_multiply",
+    "quaternion_normalize",
+    "quaternion_to_axis_angle",
+    "quaternion_to_euler",
+    "quaternion_to_matrix",
+    "quaternion_to_rotvec",
+    "relative_rotation",
+    "rotation_angle",
+    "rotvec_to_matrix",
+    "rotvec_to_quaternion",
+    "sixd_to_matrix",
+    "slerp",
+    "unwrap_euler",
+]
