@@ -149,12 +149,16 @@ BAD_MATRICES = {
 @pytest.mark.parametrize("bad", sorted(BAD_MATRICES))
 @pytest.mark.parametrize("name", sorted(MATRIX_FUNCTIONS))
 def test_matrix_functions_give_nan_for_non_rotations_in_their_own_element(name, bad):
-    f = _MF[name]
-    batch = R.copy()
-    batch[2] = BAD_MATRICES[bad]
+    _assert_nan_in_its_own_element(_MF[name], R, BAD_MATRICES[bad])
+
+
+def _assert_nan_in_its_own_element(f, good, bad):
+    """``f`` of a batch with ``bad`` in place of element 2: NaN there, the others unchanged."""
+    batch = good.copy()
+    batch[2] = bad
     out = np.asarray(f(batch))
     assert np.all(np.isnan(out[2])), out[2]
-    np.testing.assert_array_equal(np.delete(out, 2, axis=0), np.delete(f(R), 2, axis=0))
+    np.testing.assert_array_equal(np.delete(out, 2, axis=0), np.delete(f(good), 2, axis=0))
 
 
 BAD_QUATERNIONS = {
@@ -168,12 +172,7 @@ BAD_QUATERNIONS = {
 @pytest.mark.parametrize("bad", sorted(BAD_QUATERNIONS))
 @pytest.mark.parametrize("name", sorted(QUATERNION_FUNCTIONS))
 def test_quaternion_functions_give_nan_for_non_rotations_in_their_own_element(name, bad):
-    f = _QF[name]
-    batch = Q.copy()
-    batch[2] = BAD_QUATERNIONS[bad]
-    out = np.asarray(f(batch))
-    assert np.all(np.isnan(out[2])), out[2]
-    np.testing.assert_array_equal(np.delete(out, 2, axis=0), np.delete(f(Q), 2, axis=0))
+    _assert_nan_in_its_own_element(_QF[name], Q, BAD_QUATERNIONS[bad])
 
 
 def test_tiny_vector_part_gives_its_axis_and_angle():
