@@ -8,18 +8,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._matrix import (
-    _divide_split,
-    _rotation_tangent,
-    _selected_column,
-    _shepperd_divided,
-    _signed_norm,
-)
+from ._matrix import _shepperd_divided
 from ._numerics import (
     as_float,
     check_shape,
     from_scalar_last,
     like_rank,
+    pow2_scale,
     public,
     to_scalar_last,
 )
@@ -79,11 +74,10 @@ def _elementary(axis: int, angle):
 
 
 # --- a polynomial atan2 ----------------------------------------------------------------------
-# XLA:CPU's atan2 runs at about 10 M/s per core and dominated Euler extraction (three per
-# rotation). This branch-free version is measured 10x faster (``python -m rotjax bench``);
-# on 20,000 random pairs spanning six decades it is within 1.7 ulp (float32) / 2.0 ulp
-# (float64) of the correctly rounded value (XLA's: 1.2 / 1.0), which keeps the Euler backward
-# error within its bounds (tests/test_core_oracle.py, the benchmark's error columns).
+# XLA:CPU's atan2 dominated Euler extraction (three per rotation); this branch-free version
+# fuses into the surrounding loop (see the performance page). It is within about 2 ulp of the
+# correctly rounded value in both dtypes, which keeps the Euler backward error within its
+# bounds (tests/test_core_oracle.py).
 #
 # Reduction: t = min(|x|, |y|) / max(|x|, |y|) in [0, 1]; above tan(pi/8) it is mapped to
 # u = (t - 1) / (t + 1) (one division either way), so |u| <= tan(pi/8) and
@@ -163,9 +157,12 @@ def _atan2(y, x):
 @_atan2.defjvp
 def _atan2_jvp(primals, tangents):
     # The exact derivative, (x dy - y dx) / (x^2 + y^2); 0 at the origin, as safe_atan2.
+    # x and y are scaled by a power of two s first (exact), so that x^2 + y^2 cannot underflow:
+    # it is s (xs dy - ys dx) / (xs^2 + ys^2), about 1 / |(x, y)| at any scale.
     (y, x), (dy, dx) = primals, tangents
-    r2 = x * x + y * y
-    return _atan2(y, x), (x * dy - y * dx) / jnp.where(r2 == 0, 1, r2)
+    xs, ys, s = _scaled_pair(x, y)
+    r2 = xs * xs + ys * ys
+    return _atan2(y, x), (xs * dy - ys * dx) * (s / jnp.where(r2 == 0, 1, r2))
 
 
 def _euler_to_quat(a, seq):
@@ -175,32 +172,27 @@ def _euler_to_quat(a, seq):
     return _multiply(_multiply(q0, q1), q2) if intrinsic else _multiply(_multiply(q2, q1), q0)
 
 
-def _inv_pow2(x):
-    """``2^-e`` for the exponent ``e`` of ``x`` (``x = m 2^e``, ``1 <= m < 2``), exactly.
-
-    Integer arithmetic on the exponent field rather than ``1 / 2^e`` or ``jnp.frexp`` (a
-    division or frexp costs as much as the rest of the Euler extraction, and keeps XLA from
-    fusing the scaling into its consumers). Meaningful for normal ``x`` with ``e < emax``; the
-    caller returns NaN where the scaled values would not be (zero, subnormal, infinite, NaN).
-    """
-    info = jnp.finfo(x.dtype)
-    ity = {4: jnp.uint32, 8: jnp.uint64}[jnp.dtype(x.dtype).itemsize]
-    mant = info.nmant
-    bias = (1 << (info.nexp - 1)) - 1
-    exp_mask = ((1 << info.nexp) - 1) << mant
-    field = jax.lax.bitcast_convert_type(x, ity) & jnp.asarray(exp_mask, dtype=ity)
-    return jax.lax.bitcast_convert_type(jnp.asarray(2 * bias << mant, dtype=ity) - field, x.dtype)
+def _scaled_pair(u, v):
+    """``(u s, v s, s)`` for the power of two ``s`` (exact, no derivative) that brings the
+    larger of ``|u|``, ``|v|`` into ``[1, 2)``: their squares then neither underflow nor
+    overflow."""
+    s, _ = pow2_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
+    return u * s, v * s, s
 
 
 def _hypot(u, v):
-    """``sqrt(u^2 + v^2)`` with a finite (zero) gradient at the origin (double where).
+    """``sqrt(u^2 + v^2)`` at any scale (the pair is scaled by a power of two first: the
+    modulus of ``(1e-160, 0)`` is ``1e-160``, not 0), with a finite (zero) gradient at the
+    origin (double where).
 
     Written on the two scalars rather than as ``safe_norm`` of a stacked pair: XLA:CPU turns
     that reduction into separate loops.
     """
+    s, inv = pow2_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
+    u, v = u * s, v * s
     sq = u * u + v * v
     zero = sq == 0
-    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))
+    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq))) * inv
 
 
 @functools.cache
@@ -257,7 +249,7 @@ def _factors(x, y, z, w, seq):
     aq = [jnp.abs(t) for t in (x, y, z, w)]
     big = jnp.maximum(jnp.maximum(aq[0], aq[1]), jnp.maximum(aq[2], aq[3]))
     # (A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
-    scale = _inv_pow2(jax.lax.stop_gradient(big))
+    scale, _ = pow2_scale(jax.lax.stop_gradient(big))
     # The scale is applied to a, b, c, d (linear in q; a power of two, so exactly as if applied
     # to q): XLA:CPU then fuses it instead of writing a scaled copy of q.
     a, b, c, d = (scale * t for t in _abcd(x, y, z, w, seq))
@@ -276,8 +268,7 @@ def _factors(x, y, z, w, seq):
     locks = (lock_sum, lock_diff, 1 if intrinsic else -1)  # extrinsic keeps `first`
     # NaN for the zero quaternion rather than a valid-looking rotation, and for a NaN or
     # infinite component (the power-of-two scaling would otherwise zero the finite ones).
-    n2 = x * x + y * y + z * z + w * w  # a scalar sum, not jnp.sum: see _hypot
-    bad = (n2 == 0) | ~jnp.isfinite(n2)
+    bad = (big == 0) | ~jnp.isfinite(big)  # big: NaN if a component is
     return scale, (a, b, c, d), _substitute((a, b, c, d), locks), locks, bad
 
 
@@ -308,11 +299,6 @@ def _quat_to_euler(q, seq):
     # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
     # The three atan2 run on per-rotation arrays and their results are stacked on the last
     # axis: XLA:CPU compiles the extraction to one loop (two for Tait-Bryan sequences).
-    # Stacking the three numerators and denominators first and running atan2 once on (..., 3)
-    # arrays gave the same bits in three loops (interleaved ad-hoc timings, 2^20 rotations:
-    # 1.4-2.2x slower on four sequences of both kinds). Stacking the results on a leading axis
-    # and moving it last made XLA:CPU emit a transposing loop that LLVM did not vectorize in
-    # float64.
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
@@ -340,11 +326,13 @@ def _euler_jacobian(comps, seq, width, patterns):
     ``(..., width)``.
 
     The outer angles are arg(A) -+ arg(C), with derivatives Im(conj(A) dA) / |A|^2 and
-    Im(conj(C) dC) / |C|^2 (after the lock substitution, where both factors have modulus at
-    least 0.35); the middle one is 2 atan2(|C|, |A|), with derivative
-    2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) = 2 (|A|^2 C.dC - |C|^2 A.dA) / P,
-    P = |A| |C| (|A|^2 + |C|^2), taken as 0 where P = 0 (at lock the middle angle sits at
-    the edge of its range, a kink: the minimum-norm subgradient, as _hypot's).
+    Im(conj(C) dC) / |C|^2 (after the lock substitution); the middle one is
+    2 atan2(|C|, |A|), with derivative 2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) and
+    d|C| = C.dC / |C|, taken as 0 where C = 0 (at lock the middle angle sits at the edge of its
+    range, a kink: the minimum-norm subgradient, as _hypot's). Near lock one factor is tiny:
+    each is scaled by its own power of two before it is squared (:func:`_scaled_pair`), so the
+    derivatives, about 1 / distance, stay right down to the lock threshold rather than
+    dividing by an underflowed |C|^2.
 
     Written for reverse mode, whose transpose of ``sum(J * dx)`` is one elementwise loop over
     the cotangent of ``dx`` (17 XLA loops became 3 for quaternion_to_euler):
@@ -356,14 +344,25 @@ def _euler_jacobian(comps, seq, width, patterns):
       multiplied the code that fusion would emit, and XLA wrote the inputs out instead).
     """
     scale, (a, b, c, d), (sa, sb, sc, sd), _, _ = _factors(*comps, seq)
-    p = _hypot(a, b) * _hypot(c, d) * (a * a + b * b + c * c + d * d)
-    zero = p == 0
+    ua, ub, ma = _scaled_pair(sa, sb)  # substituted factors, for the outer angles
+    uc, ud, mc = _scaled_pair(sc, sd)
+    na, nc = _hypot(a, b), _hypot(c, d)  # the factors before the substitution, for the middle
+
+    def inv_modulus(u, v):
+        m2 = u * u + v * v
+        zero = m2 == 0
+        return jnp.where(zero, 0.0, 1 / jnp.sqrt(jnp.where(zero, 1.0, m2)))
+
     recip = jax.lax.optimization_barrier(
         jnp.stack(
             [
-                scale / (sa * sa + sb * sb),
-                scale / (sc * sc + sd * sd),
-                jnp.where(zero, 0.0, scale / jnp.where(zero, 1.0, p)),
+                scale * ma / (ua * ua + ub * ub),
+                scale * mc / (uc * uc + ud * ud),
+                scale / (na * na + nc * nc),
+                inv_modulus(*_scaled_pair(a, b)[:2]),
+                inv_modulus(*_scaled_pair(c, d)[:2]),
+                na,
+                nc,
             ],
             axis=-1,
         )
@@ -372,11 +371,15 @@ def _euler_jacobian(comps, seq, width, patterns):
     comps = [jnp.broadcast_to(t[..., None], shape) for t in comps]
     ea, eb, ec, ed = patterns(comps)
     _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*comps, seq)
-    p_a, p_c, t = (jnp.broadcast_to(recip[..., i : i + 1], shape) for i in range(3))
+    p_a, p_c, t, ia, ic, na, nc = (jnp.broadcast_to(recip[..., i : i + 1], shape) for i in range(7))
     sea, seb, sec, sed = _substitute((ea, eb, ec, ed), locks)
-    j_a = (sa * seb - sb * sea) * p_a
-    j_c = (sc * sed - sd * sec) * p_c
-    j_mid = (a * a + b * b) * t * (c * ec + d * ed) - (c * c + d * d) * t * (a * ea + b * eb)
+    ua, ub, _ = _scaled_pair(sa, sb)
+    uc, ud, _ = _scaled_pair(sc, sd)
+    va, vb, _ = _scaled_pair(a, b)
+    vc, vd, _ = _scaled_pair(c, d)
+    j_a = (ua * seb - ub * sea) * p_a
+    j_c = (uc * sed - ud * sec) * p_c
+    j_mid = (na * (ic * (vc * ec + vd * ed)) - nc * (ia * (va * ea + vb * eb))) * t
     order, factor, _ = _layout(seq)
     jac = {"first": j_a - j_c, "mid": j_mid, "third": j_a + j_c}
     jac = [f * jac[n] if f != 1 else jac[n] for n, f in zip(order, factor, strict=True)]
@@ -399,53 +402,11 @@ def _quat_to_euler_jvp(seq, primals, tangents):
     return _quat_to_euler(q, seq), _contract(jac, dq)
 
 
-@functools.cache
-def _tangent_patterns(seq):
-    """``(4, 4, 3)``: ``T[t, i]`` is the derivative of ``(a, b, c, d)[t]`` with respect to
-    ``u`` for ``dq = q (x) (u, 0)`` at ``q = e_i``, so that at any ``q`` it is
-    ``sum_i q_i T[t, i]`` (linear in ``q``)."""
-    # lam[i, :, k] = e_i (x) (e_k, 0), from the Hamilton product itself (once per sequence)
-    e4 = np.eye(4)
-    u = np.concatenate([np.eye(3), np.zeros((3, 1))], axis=1)
-    with jax.ensure_compile_time_eval():  # a constant, also when first needed inside a trace
-        lam = np.asarray(_multiply(e4[:, None, :], u[None, :, :]), dtype=float).transpose(0, 2, 1)
-    return np.einsum("tj,ijk->tik", _abcd_patterns(seq), lam)
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def _matrix_to_euler(R, seq):
-    # The Shepperd quaternion, written out interleaved by one loop, then quaternion_to_euler's
-    # loop. It is the selected column divided by its norm (not multiplied by a reciprocal
-    # square root): XLA:CPU then writes it out once. With lax.rsqrt it recomputed parts of it
-    # inside the extraction (three to five loops instead of two) and ran 1.8-2.4x slower
-    # (interleaved ad-hoc timings, 2^20 matrices, "xyz" and "ZXZ", float32 and float64; with
-    # the fused rsqrt, slower still). The division is also the more accurate form
-    # (largest error against the exact normalisation of the column, 2e5 matrices: 0.86 / 0.87
-    # eps against 1.16 / 1.11 with lax.rsqrt). The rule below divides alike, so it sees the
-    # same bits: near gimbal lock an ulp in q moves the angles' derivative by 7e-7 relative.
+    # The Shepperd quaternion (the selected column divided by its norm, written out once), then
+    # quaternion_to_euler's extraction. JAX differentiates it: the derivative is the true one
+    # of the function computed, with quaternion_to_euler's rule (its exact derivative) inside.
     return _quat_to_euler(_shepperd_divided(R), seq)
-
-
-@_matrix_to_euler.defjvp
-def _matrix_to_euler_jvp(seq, primals, tangents):
-    # The chain rule through the Shepperd quaternion q, with its tangent-space rule
-    # dq = 1/2 q (x) (v, 0), v = vee(R^T dR) (see _shepperd_tangent): the angles' derivatives
-    # are taken directly with respect to u = v / 2 = _rotation_tangent / 4, three components
-    # rather than four, so that JAX's transpose does not go through dq (the benchmark: jit(grad)
-    # over forward went from 0.21x to 0.42-0.51x in float32). The Shepperd quaternion is split
-    # from the stacked quotient: XLA writes it once, interleaved (ad hoc, jit(grad) took
-    # 0.75-0.87x the time of the previous rule, four per-rotation products with lax.rsqrt;
-    # four per-rotation divisions took 0.92-1.05x).
-    (R,), (dR,) = primals, tangents
-    c, sq = _selected_column(R)
-    comps = _divide_split(c, _signed_norm(c, sq))  # _shepperd_divided's bits, as four arrays
-    pat = _tangent_patterns(seq).astype(R.dtype)
-
-    def patterns(wide):
-        return [sum(wide[i] * like_rank(pat[t, i], wide[i]) for i in range(4)) for t in range(4)]
-
-    u = jnp.stack(_rotation_tangent(R, dR), axis=-1) / 4
-    return _matrix_to_euler(R, seq), _contract(_euler_jacobian(comps, seq, 3, patterns), u)
 
 
 @public
@@ -517,11 +478,16 @@ def quaternion_to_euler(q, seq: str, degrees: bool = False, scalar_first: bool =
         float32) only the sum or difference of the outer angles is defined. The third angle
         is then returned as 0 and the first carries the whole rotation, like scipy.
 
+        *Scale.* ``q`` need not be unit: any finite non-zero scale gives the same angles (an
+        exact power-of-two prescaling); zero, infinite or NaN components give NaN.
+
         *Gradient rule.* Near lock the gradient is the true derivative (it grows like
-        1/distance). Exactly at lock the gradient is that of the branch that fixes the third
-        angle at 0: the first angle gets the derivative of the defined sum/difference, the third
-        angle gets 0, and the middle angle, which sits at a kink (the edge of its range), gets
-        0 (the minimum-norm subgradient). All are finite.
+        1/distance), finite at every distance down to the lock threshold (each factor is
+        scaled by its own power of two before it is squared). Exactly at lock the gradient is
+        that of the branch that fixes the third angle at 0: the first angle gets the derivative
+        of the defined sum/difference, the third angle gets 0, and the middle angle, which sits
+        at a kink (the edge of its range), gets 0 (the minimum-norm subgradient). All are
+        finite.
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
@@ -546,9 +512,12 @@ def matrix_to_euler(R, seq: str, degrees: bool = False):
         the behaviour at gimbal lock and the gradient rule.
 
     Note:
-        The derivative with respect to ``R`` is that of :func:`matrix_to_quaternion`'s
-        ``"shepperd"`` rule followed by :func:`quaternion_to_euler`'s: exact along SO(3); a
-        perturbation off SO(3) counts only through its component along the tangent space.
+        Computed as :func:`quaternion_to_euler` of :func:`matrix_to_quaternion`'s
+        ``"shepperd"`` quaternion: scale invariant (any ``s R``, ``s > 0``, from 1e-30 to 1e30
+        in float32, 1e-300 to 1e300 in float64), NaN for the zero matrix or a non-finite entry.
+        The gradient is the derivative of the function computed, in every 3x3 direction, on
+        and off SO(3) (see :func:`matrix_to_quaternion`), with the gimbal-lock rule of
+        :func:`quaternion_to_euler`.
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")

@@ -5,28 +5,34 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
 
 from ._numerics import (
     as_float,
     check_shape,
     from_scalar_last,
     matvec,
+    max_abs,
     public,
     rsqrt,
     top_eigenvector,
+    unit_scale,
 )
 
 METHODS = ("shepperd", "markley", "optimal")
 
 
-def _k4_columns(R):
+def _k4_columns(R, one=1.0):
     """The four columns of ``K = 4 q q^T + (trace-free noise terms)`` as polynomials in ``R``.
 
     For a rotation matrix ``R = R(q)`` (active, scalar-last ``q``) column ``i`` equals
     ``4 q_i q``; Baruh/Kamman Eqs. (2)-(8) transposed to the active convention. Each candidate is
     exact arithmetic on the entries of ``R`` (no division, no root), so the selection below is
     branch-free and every candidate stays finite.
+
+    ``one`` is the ``1 = |q|^2`` on the diagonal. For a scaled rotation ``t R(q)`` the columns
+    are ``4 t q_i q`` with ``one = t``: passing an estimate of ``t`` (homogeneous of degree 1
+    in ``R``) makes ``K`` homogeneous, so that every quaternion read from it is scale
+    invariant. Replacing 1 by ``t`` adds ``(t - 1) I``, which changes no eigenvector.
     """
     r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
     r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
@@ -39,10 +45,10 @@ def _k4_columns(R):
     sxy, sxz, syz = r01 + r10, r02 + r20, r12 + r21
     ax, ay, az = r21 - r12, r02 - r20, r10 - r01
     cols = (
-        (1.0 + dx, sxy, sxz, ax),
-        (sxy, 1.0 + dy, syz, ay),
-        (sxz, syz, 1.0 + dz, az),
-        (ax, ay, az, 1.0 + dw),
+        (one + dx, sxy, sxz, ax),
+        (sxy, one + dy, syz, ay),
+        (sxz, syz, one + dz, az),
+        (ax, ay, az, one + dw),
     )
     return cols, (dx, dy, dz, dw)
 
@@ -55,8 +61,8 @@ def _positive_w(q):
 def _select(masks, vals):
     """``vals[i]`` for the first true mask ``(use_x, use_y, use_z)``, else ``vals[3]``.
 
-    Nested ``jnp.where`` fuses into the surrounding XLA loop; an argmax + gather was measured
-    slower, and a one-hot product turns ``0 * inf`` into NaN.
+    Nested ``jnp.where`` fuses into the surrounding XLA loop (an argmax + gather does not), and
+    unlike a one-hot product it cannot turn ``0 * inf`` into NaN.
     """
     use_x, use_y, use_z = masks
     v = jnp.where(use_z, vals[2], vals[3])
@@ -64,26 +70,53 @@ def _select(masks, vals):
     return jnp.where(use_x, vals[0], v)
 
 
-def _selected_column(R):
+def _prescaled(R):
+    """``R`` times a power of two that brings its largest entry into ``[0.5, 2)`` (exact; 1 for
+    a rotation matrix), so that no product below overflows or underflows, and its squared
+    Frobenius norm; both NaN where ``R`` is zero or has a non-finite entry (not a rotation)."""
+    r = [R[..., k, j] for k in range(3) for j in range(3)]
+    s = unit_scale(max_abs(*r))
+    f2 = sum((x * s) * (x * s) for x in r)  # a scalar sum, not jnp.sum: one fused loop
+    ok = (f2 > 0) & jnp.isfinite(f2)
+    R = jnp.where(ok[..., None, None], R * s[..., None, None], jnp.nan)
+    return R, jnp.where(ok, f2, jnp.nan), s
+
+
+def _scaled_k(R):
+    """The columns of the homogeneous ``K`` (see :func:`_k4_columns`) of the prescaled ``R``,
+    with ``t = |R|_F / sqrt(3)`` (1 for a rotation matrix, ``s`` for ``s`` times one), and the
+    ``d`` terms. NaN throughout for a zero or non-finite ``R``."""
+    R, f2, _ = _prescaled(R)
+    h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
+    return _k4_columns(R, h * rsqrt(h))
+
+
+def _masks(diag):
+    """``(use_x, use_y, use_z)`` for :func:`_select`: the largest diagonal entry of ``K``."""
+    dx, dy, dz, dw = diag
+    return (dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw
+
+
+def _select_column(cols, diag):
     """The column of ``K`` with the largest diagonal entry, as four per-rotation arrays, and its
-    squared norm: at least 1 for any finite ``R`` (the four diagonal entries of ``K`` sum to 4,
-    so the largest is at least 1), hence no small divisor and :func:`rsqrt`'s domain."""
-    cols, (dx, dy, dz, dw) = _k4_columns(R)
-    masks = ((dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw)
+    squared norm, at least ``t^2 >= 1/12`` (the four diagonal entries of ``K`` sum to ``4 t``,
+    so the largest is at least ``t``): no small divisor, and :func:`rsqrt`'s domain."""
+    masks = _masks(diag)
     c = [_select(masks, [col[i] for col in cols]) for i in range(4)]
     return c, sum(x * x for x in c)
 
 
+def _selected_column(R):
+    """:func:`_select_column` of the prescaled, homogeneous ``K`` of ``R``."""
+    return _select_column(*_scaled_k(R))
+
+
 def _hemisphere_scale(v, sq, root=rsqrt):
-    """``1 / |v|`` (``sq = |v|^2 >= 1`` here: see :func:`_selected_column`), negated where
+    """``1 / |v|`` (``sq = |v|^2``, away from 0: see :func:`_select_column`), negated where
     ``w < 0``: ``v * scale`` is the unit quaternion with ``w >= 0``.
 
     ``root``: :func:`rsqrt` (default), which XLA fuses into the loop that writes the four
-    components; ``lax.rsqrt`` in a derivative rule, where the scale feeds many consumers and XLA
-    should compute it once rather than inside each (with the fused form, ``matrix_to_euler``'s
-    ``jit(grad)`` fell from 0.44x to 0.08x of its forward pass in the benchmark, when its rule
-    took the scale from here; an optimisation barrier on the fused form did not help).
-    With ``jnp.sqrt`` it gives the signed norm instead (:func:`_signed_norm`).
+    components. With ``jnp.sqrt`` it gives the signed norm instead (:func:`_signed_norm`).
     """
     s = root(sq)
     return jnp.where(v[3] < 0, -s, s)
@@ -92,8 +125,7 @@ def _hemisphere_scale(v, sq, root=rsqrt):
 def _stack_last(v, scale):
     """``(..., 4)`` from four per-rotation components times a per-rotation scale.
 
-    Stacked on a leading axis and moved last: XLA:CPU emits one transposing loop (stacking on
-    the last axis directly was 2.5x slower in float32, when the scale was ``lax.rsqrt``).
+    Stacked on a leading axis and moved last: XLA:CPU emits one transposing loop.
     """
     return jnp.moveaxis(jnp.stack(v, axis=0) * scale[None], 0, -1)
 
@@ -102,21 +134,64 @@ def _stack_last(v, scale):
 def _shepperd(R):
     """Shepperd extraction, scalar last, ``w >= 0``: the selected column of ``K`` over its norm.
 
-    Written for XLA:CPU, measured with ``python -m rotjax bench``: every step is a per-rotation
-    scalar expression (no reduction over a stacked axis); the four components are selected
-    first and the scale ``rsqrt(|c|^2)`` is computed from them (not from the norms of all four
-    columns); the components are stacked on a leading axis and moved to the end
-    (:func:`_stack_last`). With the scale from :func:`rsqrt` (multiplications and additions
-    only) XLA emits a single transposing loop: the matrix is read once. With ``lax.rsqrt``,
-    which XLA will not recompute for each of the four components, it emitted a loop for the
-    scale and a second one that read the matrix again (full benchmark runs: 53% / 34% of the
-    copy kernel's rate in float32 / float64, against 76-94% / 48-79% over nine runs with one
-    loop).
+    Written for XLA:CPU: every step is a per-rotation scalar expression (no reduction over a
+    stacked axis); the four components are selected first and the scale ``rsqrt(|c|^2)`` is
+    computed from them; with :func:`rsqrt` (multiplications and additions only) XLA emits a
+    single transposing loop that reads the matrix once. JAX differentiates this code itself:
+    every operation has a finite derivative wherever it is reached (the divisor is at least
+    ``t^2``), and at a switch of the selected column it is the derivative of the branch taken.
+    The rule below is that derivative, written for reverse mode (tested equal to JAX's).
     """
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
     return _stack_last(c, _hemisphere_scale(c, sq))
+
+
+def _dk_pattern():
+    """``P[a, b, k, j]``: the derivative of ``K[a, b]`` with respect to ``R[k, j]`` (``K`` is
+    affine in ``R``; read off :func:`_k4_columns` on unit matrices, in NumPy)."""
+    out = np.zeros((4, 4, 3, 3))
+    for k in range(3):
+        for j in range(3):
+            e = np.zeros((3, 3))
+            e[k, j] = 1.0
+            cols, _ = _k4_columns(e, 0.0)
+            out[:, :, k, j] = np.array(cols).T
+    return out
+
+
+_DK_PATTERN = _dk_pattern()
+
+
+@_shepperd.defjvp
+def _shepperd_jvp(primals, tangents):
+    # JAX's derivative of _shepperd, term by term: R1 = s R (s a constant power of two),
+    # t = h rsqrt(h) with h = |R1|^2 / 3, so dt = tau dh, tau = y (1 - h y^2 / 2), y = rsqrt(h)
+    # (rsqrt's rule); dc = dK e_i for the selected column i (the masks are constant);
+    # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc. dR enters only through
+    # u_a = sum(M_a * dR) with M_a = z s (dK[a, i] / dR + (2/3) tau R1 [a = i]), elementwise
+    # products whose transpose (reverse mode) is one loop writing the cotangent of R.
+    (R,), (dR,) = primals, tangents
+    R1, f2, s = _prescaled(R)
+    h = f2 / 3
+    y = rsqrt(h)
+    cols, diag = _k4_columns(R1, h * y)
+    use_x, use_y, use_z = _masks(diag)
+    sel = [use_x, ~use_x & use_y, ~use_x & ~use_y & use_z, ~use_x & ~use_y & ~use_z]
+    sel = [m.astype(R.dtype)[..., None, None] for m in sel]
+    c = [_select((use_x, use_y, use_z), [col[a] for col in cols]) for a in range(4)]
+    z = _hemisphere_scale(c, sum(x * x for x in c))
+    q = [x * z for x in c]
+    zs = (z * s)[..., None, None]
+    dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * R1
+    pat = _DK_PATTERN.astype(R.dtype)
+    u = []
+    for a in range(4):
+        m = sum(sel[b] * pat[a, b] for b in range(4)) + sel[a] * dt
+        u.append(jnp.sum((zs * m) * dR, axis=(-2, -1)))
+    qu = sum(q[a] * u[a] for a in range(4))
+    return _shepperd(R), jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
 
 
 def _signed_norm(c, sq):
@@ -126,51 +201,6 @@ def _signed_norm(c, sq):
     return _hemisphere_scale(c, sq, jnp.sqrt)
 
 
-def _shepperd_tangent(R, dR):
-    """The selected column ``c``, its squared norm, and the four components of the Shepperd
-    quaternion's tangent ``dq`` (per-rotation arrays) for a tangent ``dR``.
-
-    Tangent-space rule: with dR = R hat(v) on SO(3), dq = 1/2 q (x) (v, 0), v = vee(R^T dR).
-    Off the tangent space, dR is projected onto it through R^T: at a rotation matrix this is
-    the derivative of the nearest-rotation quaternion ("optimal").
-
-    The code is arranged for reverse mode, where JAX transposes it (measured: jit(grad) went
-    from 12 XLA loops to 2):
-
-    * dR enters only through :func:`_rotation_tangent`;
-    * v is divided by the signed column norm last (:func:`_divide_split`), so in the transpose
-      the cotangent of v ends in a division, which XLA does not recompute inside each of the
-      nine consumers, and is written interleaved in one pass.
-    """
-    c, sq = _selected_column(R)
-    n = 4.0 * _signed_norm(c, sq)  # q = c / (n / 4); the 1/2 of v and of dq folded in
-    vx, vy, vz = _divide_split(_rotation_tangent(R, dR), n)
-    x, y, z, w = c
-    dq = [
-        w * vx + y * vz - z * vy,
-        w * vy + z * vx - x * vz,
-        w * vz + x * vy - y * vx,
-        -(x * vx + y * vy + z * vz),
-    ]
-    return c, sq, dq
-
-
-def _divide_split(parts, n):
-    """``[p / n for p in parts]`` (per-rotation arrays), arranged for reverse mode.
-
-    The parts are stacked on the last axis, divided by ``n`` stacked alike, and split again
-    with ``jnp.split``. JAX transposes a split into a concatenation, so the cotangents of the
-    parts are written as one interleaved ``(..., k)`` array, one rotation after another, in a
-    single pass over ``R``; the division makes XLA materialise it rather than recompute it in
-    each consumer. Unstacking by indexing (``v[..., i]`` or ``v[i]``) transposes into padding
-    instead, and XLA:CPU then wrote a planar ``(k, ...)`` array, one pass over ``R`` per part
-    (``jit(grad)`` of ``"shepperd"`` over its forward pass, float32 / float64, in the benchmark:
-    0.21-0.29x / 0.21-0.26x over five runs before, 0.24-0.34x / 0.27-0.29x over four after;
-    side by side in an ad-hoc interleaved timing, 0.27x -> 0.40x in float32).
-    """
-    return [t[..., 0] for t in jnp.split(_divide_stacked(parts, n), len(parts), axis=-1)]
-
-
 def _divide_stacked(parts, n):
     """``(..., k)``: the parts (per-rotation arrays) stacked last and divided by ``n`` stacked
     alike. XLA:CPU keeps the division (a divisor broadcast from ``(..., 1)`` was turned into a
@@ -178,60 +208,12 @@ def _divide_stacked(parts, n):
     return jnp.stack(parts, axis=-1) / jnp.stack([n] * len(parts), axis=-1)
 
 
-def _rotation_tangent(R, dR):
-    """``2 vee(R^T dR)`` (three per-rotation arrays) for a rotation matrix ``R``: twice the
-    body-frame angular velocity of ``dR`` (exact for ``dR = R hat(v)``; off the tangent space,
-    its projection onto it). Computed as ``sum_k dR_k x R_k`` over the rows ``k``; ``dR``
-    enters only through elementwise products with three (..., 3, 3) arrays built from ``R``,
-    whose transpose (reverse mode) is one elementwise loop that writes the cotangent of ``R``.
-    """
-    r0, r1, r2 = R[..., 0], R[..., 1], R[..., 2]  # columns of R
-    o = jnp.zeros_like(r0)
-    rows = (  # (dR_k x R_k)_a = sum_j A_a[k, j] dR[k, j]
-        jnp.stack([o, r2, -r1], axis=-1),
-        jnp.stack([-r2, o, r0], axis=-1),
-        jnp.stack([r1, -r0, o], axis=-1),
-    )
-    return [jnp.sum(a * dR, axis=(-2, -1)) for a in rows]
-
-
-@jax.custom_jvp
 def _shepperd_divided(R):
     """The Shepperd quaternion as the selected column divided by its signed norm (stacked, see
-    :func:`_divide_stacked`), for ``matrix_to_euler``; its derivative rule uses the same bits
-    through :func:`_divide_split`. Same tangent rule as :func:`_shepperd`."""
+    :func:`_divide_stacked`), for ``matrix_to_euler``: XLA:CPU writes it out once, where with
+    a reciprocal square root it recomputed parts of it inside the Euler extraction."""
     c, sq = _selected_column(R)
     return _divide_stacked(c, _signed_norm(c, sq))
-
-
-def _define_shepperd_jvp(f):
-    def jvp(primals, tangents):
-        (R,), (dR,) = primals, tangents
-        _, _, dq = _shepperd_tangent(R, dR)
-        return f(R), jnp.stack(dq, axis=-1)
-
-    f.defjvp(jvp)
-
-
-_define_shepperd_jvp(_shepperd)
-_define_shepperd_jvp(_shepperd_divided)
-
-
-def _dk_pattern():
-    """``S[c, a]`` (3x3) with ``(dK p)_c = sum_kj (sum_a p_a S[c, a])[k, j] dR[k, j]``, read off
-    :func:`_k4_columns` (``K`` is affine in ``R``) by evaluating it, in NumPy, on unit
-    matrices."""
-    out = np.zeros((4, 4, 3, 3))
-    for k in range(3):
-        for j in range(3):
-            e = np.zeros((3, 3))
-            e[k, j] = 1.0
-            cols, _ = _k4_columns(e)
-            out[:, :, k, j] = (np.array(cols) - np.eye(4)).T  # dK/dR[k, j]; symmetric
-    return out
-
-
-_DK_PATTERN = _dk_pattern()
 
 
 def _k_times(cols, p):
@@ -239,7 +221,6 @@ def _k_times(cols, p):
     return [sum(cols[i][c] * p[i] for i in range(4)) for c in range(4)]
 
 
-@jax.custom_jvp
 def _markley(R):
     """Shepperd's quaternion refined by one power-iteration step with ``K``, ``w >= 0``.
 
@@ -248,45 +229,11 @@ def _markley(R):
     expressions throughout, as in :func:`_shepperd` (the Shepperd quaternion is not stacked
     and unstacked in between: that cost a transposing loop).
     """
-    c, sq = _selected_column(R)
+    cols, diag = _scaled_k(R)
+    c, sq = _select_column(cols, diag)
     s0 = _hemisphere_scale(c, sq)
-    cols, _ = _k4_columns(R)
     v = _k_times(cols, [x * s0 for x in c])
     return _stack_last(v, _hemisphere_scale(v, sum(x * x for x in v)))
-
-
-@_markley.defjvp
-def _markley_jvp(primals, tangents):
-    # The exact derivative of the formula with the Shepperd step's tangent-space rule inside
-    # (the true derivative on SO(3); off it, within O(sigma) of it: see matrix_to_quaternion),
-    # written by hand so that reverse mode compiles to few loops (the benchmark's jit(grad)
-    # over forward went from 0.11x to 0.33x in float32, against JAX's own transposition of
-    # the forward code):
-    # dv = K(R) dq0 + dK q0, where dK q0 = sum_kj M_c[k, j](q0) dR[k, j] (M_c read off K's
-    # columns, linear in R); then q = v / |v| gives dq = (I - q q^T) dv / |v|. As in
-    # _shepperd_tangent, dR enters through elementwise products only, and dv is divided by the
-    # signed norm (a division that XLA does not recompute inside each consumer).
-    (R,), (dR,) = primals, tangents
-    c, sq, dq0 = _shepperd_tangent(R, dR)
-    # lax.rsqrt (see _hemisphere_scale): q0 may differ from the forward pass's by an ulp, which
-    # this well-conditioned derivative does not notice (equal to autodiff to 1e-12, tested).
-    s0 = _hemisphere_scale(c, sq, lax.rsqrt)
-    cols, _ = _k4_columns(R)
-    px, py, pz, pw = (x * s0 for x in c)
-    v = _k_times(cols, [px, py, pz, pw])
-    n = _signed_norm(v, sum(x * x for x in v))
-
-    # M_c = sum_a p_a S[c, a]: a broadcast against constant sign patterns, which XLA fuses
-    # into the loop that consumes it (stacking the entries made it materialise them).
-    p = (px, py, pz, pw)
-    pat = _DK_PATTERN.astype(R.dtype)
-    m = [sum(p[a][..., None, None] * pat[c, a] for a in range(4)) for c in range(4)]
-    dk = _k_times(cols, dq0)
-    w = _divide_split([dk[c] + jnp.sum(m[c] * dR, axis=(-2, -1)) for c in range(4)], n)
-    inv = 1 / n
-    q = [x * inv for x in v]
-    qw = sum(q[c] * w[c] for c in range(4))
-    return _markley(R), jnp.stack([w[c] - q[c] * qw for c in range(4)], axis=-1)
 
 
 def _unit(v):
@@ -299,6 +246,7 @@ def _from_matrix(R, method: str):
     if method == "markley":
         return _markley(R)
     if method == "optimal":
+        R, _, _ = _prescaled(R)
         cols, _ = _k4_columns(R)
         K = jnp.stack([jnp.stack(c, axis=-1) for c in cols], axis=-1)
         # Bar-Itzhack 2000: the top eigenvector of the symmetric K is the quaternion of the
@@ -342,27 +290,28 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
         sign is that of the selected component).
 
     Note:
-        No sqrt or division is applied to a small number: the selected column has norm at least
-        1 for a rotation matrix, so every method is finite and differentiable everywhere,
-        including the identity and every 180-degree rotation.
+        *Scale.* ``K`` is built homogeneous (its diagonal ``1 = |q|^2`` replaced by
+        ``t = |R|_F / sqrt(3)``, which adds ``(t - 1) I`` and changes no eigenvector), and
+        ``R`` is scaled by an exact power of two when its largest entry is outside
+        ``[0.5, 2)``: every method gives the same unit quaternion, to a few eps, for ``s R``
+        as for ``R``, for any ``s > 0`` from 1e-30 to 1e30 (float32) or 1e-300 to 1e300
+        (float64). A rotation matrix is not rescaled. The zero matrix, or any infinite or NaN
+        entry, gives NaN (in that batch element only).
 
-        *Gradients.* For ``"shepperd"`` the derivative is the tangent-space rule
-        ``dq = 1/2 q (x) (v, 0)`` with ``v = vee(R^T dR)`` (a ``jax.custom_jvp``): exact for
-        every perturbation that stays on SO(3), and for a perturbation off SO(3) it keeps only
-        its component along the tangent space, which at a rotation matrix equals the derivative
-        of the ``"optimal"`` quaternion. So the gradient of a loss with respect to a free 3x3
-        matrix is not that of the raw Shepperd formula (which would also react to scaling and
-        shear); compose with an explicit projection if that is what you need. For
-        ``"markley"`` the gradient is the exact derivative of the power step applied to the
-        Shepperd quaternion (with the rule above for the latter). At a rotation matrix this is
-        the true derivative of the returned quaternion along every direction, off SO(3) too
-        (there ``K = 4 q q^T`` annihilates the Shepperd step's share); for a matrix with noise
-        sigma it deviates from the true derivative by O(sigma): a median 0.45 sigma (relative,
-        random directions), against 2 sigma for the rule above, which would be the cheaper
-        choice. For
-        ``"optimal"`` the gradient is that of the top eigenvector (the power step does not
-        change it), finite while the top eigenvalue is simple (always, for matrices near a
-        rotation).
+        *Singular points.* No sqrt or division is applied to a small number: the selected
+        column has squared norm at least ``t^2``, so every method is finite and differentiable
+        at the identity and at every 180-degree rotation.
+
+        *Gradients.* ``jax.grad`` and ``jax.jvp`` give the derivative of the function computed,
+        in every 3x3 direction, on and off SO(3): a perturbation ``R @ S`` with ``S``
+        symmetric (scaling, shear) moves ``"shepperd"`` and ``"markley"`` as it moves their
+        formulas. Where the selected column switches (off SO(3) the result jumps there), it
+        is the derivative of the branch taken. ``"shepperd"`` has a hand-written rule for
+        reverse-mode speed, equal to JAX's derivative of its code (tested). For the derivative
+        of "the rotation nearest to this matrix", which ignores such perturbations to first
+        order, use ``"optimal"``: its gradient is that of the top eigenvector (the power step
+        does not change it), finite while the top eigenvalue is simple (always, for matrices
+        near a rotation).
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")

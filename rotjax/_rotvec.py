@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from ._matrix import _from_matrix
@@ -13,11 +14,12 @@ from ._numerics import (
     hat,
     like_rank,
     matmul,
+    pow2_scale,
     public,
     safe_norm,
     to_scalar_last,
 )
-from ._quaternion import _angle
+from ._quaternion import _angle, _prescaled
 
 
 def _small(x2):
@@ -40,7 +42,9 @@ def _rotvec_to_quat(v):
 
 
 def _quat_to_rotvec(q):
-    """Logarithm map of a scalar-last quaternion of any non-zero norm; angle in [0, pi]."""
+    """Logarithm map of a scalar-last quaternion of any finite non-zero norm; angle in
+    [0, pi]."""
+    q = _prescaled(q)
     q = jnp.where(q[..., 3:] < 0, -q, q)  # w >= 0 gives the angle in [0, pi]
     qv, w = q[..., :3], q[..., 3]
     n2 = jnp.sum(qv * qv, axis=-1)
@@ -150,7 +154,8 @@ def matrix_to_rotvec(R, degrees: bool = False):
     Note:
         Going through :func:`matrix_to_quaternion` keeps full accuracy at 180 degrees, where
         ``acos((trace - 1) / 2)`` formulas lose half the digits and the axis from the
-        antisymmetric part vanishes.
+        antisymmetric part vanishes. Scale invariant and NaN for non-rotations like it, and the
+        gradient is the derivative of the function computed, off SO(3) too.
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
@@ -198,20 +203,27 @@ def quaternion_to_axis_angle(q, degrees: bool = False, scalar_first: bool = Fals
 
     Note:
         At the identity the axis is undefined; ``(1, 0, 0)`` is returned, with a zero gradient
-        (finite, by the double where). The angle uses atan2 (see :func:`rotation_angle`).
+        (finite, by the double where). A tiny but non-zero vector part (``1e-160`` next to
+        ``w = 1``) gives its own direction: it is scaled by a power of two before its norm is
+        taken. Any finite non-zero scale of ``q`` gives the same result. The angle uses atan2
+        (see :func:`rotation_angle`).
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
-    q = to_scalar_last(q, scalar_first)
+    q = _prescaled(to_scalar_last(q, scalar_first))
     q = jnp.where(q[..., 3:] < 0, -q, q)
     qv = q[..., :3]
+    # The vector part scaled on its own (a power of two), so that a tiny one (1e-160 next to
+    # w = 1) still gives its direction rather than underflowing to the identity's.
+    s, _ = pow2_scale(jax.lax.stop_gradient(jnp.max(jnp.abs(qv), axis=-1)))
+    qv = qv * s[..., None]
     n = safe_norm(qv)
     ident = (n == 0)[..., None]
     e_x = jnp.asarray([1.0, 0.0, 0.0], dtype=q.dtype)
     axis = jnp.where(ident, e_x, qv / jnp.where(ident, 1.0, n[..., None]))
-    # NaN (not a valid-looking identity) for the zero quaternion.
-    axis = jnp.where(jnp.sum(q * q, axis=-1, keepdims=True) == 0, jnp.nan, axis)
     angle = _angle(q)
+    # NaN (not a valid-looking identity) for the zero quaternion or a non-finite component.
+    axis = jnp.where(jnp.isnan(angle)[..., None], jnp.nan, axis)
     if degrees:
         angle = jnp.rad2deg(angle)
     return axis.astype(dt), angle.astype(dt)
