@@ -217,7 +217,8 @@ def _broadcast_batches(arrays: dict) -> None:
     rank = max((len(s) for s in lead.values()), default=0)
     for n, s in lead.items():
         if len(s) < rank:
-            arrays[n] = jnp.reshape(arrays[n], (1,) * (rank - len(s)) + jnp.shape(arrays[n]))
+            x = jnp.asarray(arrays[n])
+            arrays[n] = x.reshape((1,) * (rank - len(s)) + x.shape)
 
 
 def _check_static(name: str, value):
