@@ -212,8 +212,8 @@ def _broadcast_batches(arrays: dict) -> None:
             except ValueError:
                 raise ValueError(
                     f"leading (batch) shapes do not broadcast: {m} has {lead[m]} (shape "
-                    f"{jnp.shape(arrays[m])}) and {n} has {lead[n]} (shape {jnp.shape(arrays[n])}); "
-                    "expected batch shapes that broadcast"
+                    f"{jnp.shape(arrays[m])}) and {n} has {lead[n]} "
+                    f"(shape {jnp.shape(arrays[n])}); expected batch shapes that broadcast"
                 ) from None
     rank = max((len(s) for s in lead.values()), default=0)
     for n, s in lead.items():
