@@ -265,12 +265,14 @@ def _broadcast_batches(arrays: dict) -> None:
             except ValueError:
                 raise ValueError(
                     f"leading (batch) shapes do not broadcast: {m} has {lead[m]} (shape "
-                    f"{jnp.shape(arrays[m])}) and {n} has {lead[n]} (shape {jnp.shape(arrays[n])})"
+                    f"{jnp.shape(arrays[m])}) and {n} has {lead[n]} "
+                    f"(shape {jnp.shape(arrays[n])}); expected batch shapes that broadcast"
                 ) from None
     rank = max((len(s) for s in lead.values()), default=0)
     for n, s in lead.items():
         if len(s) < rank:
-            arrays[n] = jnp.reshape(arrays[n], (1,) * (rank - len(s)) + jnp.shape(arrays[n]))
+            x = jnp.asarray(arrays[n])
+            arrays[n] = x.reshape((1,) * (rank - len(s)) + x.shape)
 
 
 def _check_static(name: str, value):
