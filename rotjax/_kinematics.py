@@ -24,6 +24,8 @@ The other three cases map onto it exactly (derived here, checked against autodif
 
 from __future__ import annotations
 
+import operator
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -32,6 +34,7 @@ from ._euler import is_proper, parse_seq
 from ._numerics import (
     as_float,
     check_shape,
+    cross,
     from_scalar_last,
     hat,
     matmul,
@@ -387,6 +390,17 @@ def angular_velocity_to_matrix_derivative(R, omega, frame: str = "body"):
 # --- attitude propagation ----------------------------------------------------------------------
 
 
+def _propagation_args(q, omega, frame, method, methods, name):
+    """Validated ``(q, omega, out_dtype)`` for the integrators (a bad frame or method raises)."""
+    (q, w), out_dt = as_float(q, omega)
+    check_shape(q, (4,), name)
+    check_shape(w, (3,), "omega")
+    _check_frame(frame)
+    if method not in methods:
+        raise ValueError(f"method must be one of {methods}, got {method!r}")
+    return q, w, out_dt
+
+
 @public
 def integrate_angular_velocity(
     q, omega, dt, frame: str = "body", method: str = "exponential", scalar_first: bool = False
@@ -421,13 +435,13 @@ def integrate_angular_velocity(
 
             step = lambda q, w: (integrate_angular_velocity(q, w, dt),) * 2
             q_end, q_traj = jax.lax.scan(step, q0, omegas)
+
+        Holding each sample makes the result first order in the sample interval, whatever the
+        method: ``"rk4"`` integrates the held signal accurately, not the motion between the
+        samples. For a log of samples, :func:`integrate_angular_velocity_samples` reads
+        ``omega`` between them (second or fourth order).
     """
-    (q, w), out_dt = as_float(q, omega)
-    check_shape(q, (4,), "q")
-    check_shape(w, (3,), "omega")
-    _check_frame(frame)
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    q, w, out_dt = _propagation_args(q, omega, frame, method, METHODS, "q")
     h = jnp.asarray(dt).astype(q.dtype)[..., None]
     q = to_scalar_last(q, scalar_first)
     if method == "exponential":
@@ -459,13 +473,14 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
         angles: ``(..., T, ..., 3)`` Euler angles in radians, in the order of ``seq``, e.g. from
             :func:`rotjax.quaternion_to_euler`; the last axis holds the three angles.
         seq: axis sequence; see :func:`euler_rate_matrix`.
-        axis: the time axis (any axis but the last).
+        axis: the time axis (any integer-like value, any axis but the last).
 
     Returns:
         Array of the same shape: at each sample, among the two solution sets and all ``2 pi``
         shifts of each angle, the one nearest (sum of squared differences) to the previous
         output sample. Every output sample describes the same rotation as its input. The first
-        sample is returned unchanged.
+        sample is returned unchanged. A sample with a NaN or infinite angle is returned as it
+        is and skipped: the next finite sample is unwrapped against the last finite output.
 
     Note:
         The second solution set is ``(a0 + pi, pi - a1, a2 + pi)`` for Tait-Bryan sequences and
@@ -480,12 +495,7 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
     (a,), dt = as_float(angles)
     check_shape(a, (3,), "angles")
     parse_seq(seq)  # a bad seq raises here, before any array work
-    ndim = a.ndim
-    if not isinstance(axis, int) or not -ndim <= axis < ndim or axis % ndim == ndim - 1:
-        raise ValueError(
-            f"axis must index a time axis of angles with shape {a.shape} other than the last "
-            f"(the angle axis), got {axis!r}"
-        )
+    axis = _time_axis(axis, a.ndim, "angles", a.shape)
     x = jnp.moveaxis(a, axis, 0)
     if x.shape[0] == 0:
         return a.astype(dt)
@@ -494,18 +504,292 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
     # b = pi - a1 when i != k and b = -a1 when i == k (rotating by pi about e_i flips e_j).
     flip = np.array([1.0, -1.0, 1.0])
     offset = np.array([np.pi, 0.0 if is_proper(seq) else np.pi, np.pi])
-    flip, offset = jnp.asarray(flip, x.dtype), jnp.asarray(offset, x.dtype)
+    lead = (1,) * (x.ndim - 2)  # explicit ranks: no implicit rank promotion
+    flip = jnp.asarray(flip, x.dtype).reshape(lead + (3,))
+    offset = jnp.asarray(offset, x.dtype).reshape(lead + (3,))
 
     def nearest(c, prev):
         return c + two_pi * jnp.round((prev - c) / two_pi)
 
-    def step(prev, sample):
-        c1 = nearest(sample, prev)
-        c2 = nearest(offset + flip * sample, prev)
-        d1 = jnp.sum((c1 - prev) ** 2, axis=-1, keepdims=True)
-        d2 = jnp.sum((c2 - prev) ** 2, axis=-1, keepdims=True)
-        out = jnp.where(d2 < d1, c2, c1)
-        return out, out
+    def step(carry, sample):
+        prev, seen = carry
+        # A non-finite sample is returned as it is and leaves the reference untouched: the next
+        # finite sample is unwrapped against the last finite output (or passed through unchanged
+        # if none came before). Double where: ``prev`` is made finite before the arithmetic.
+        ok = jnp.all(jnp.isfinite(sample), axis=-1, keepdims=True)
+        ref = jnp.where(seen, prev, 0.0)
+        s = jnp.where(ok, sample, 0.0)
+        c1 = nearest(s, ref)
+        c2 = nearest(offset + flip * s, ref)
+        d1 = jnp.sum((c1 - ref) ** 2, axis=-1, keepdims=True)
+        d2 = jnp.sum((c2 - ref) ** 2, axis=-1, keepdims=True)
+        out = jnp.where(seen, jnp.where(d2 < d1, c2, c1), s)
+        out = jnp.where(ok, out, sample)
+        return (jnp.where(ok, out, prev), seen | ok), out
 
-    _, y = jax.lax.scan(step, x[0], x)
+    seen0 = jnp.zeros(x.shape[1:-1] + (1,), dtype=bool)
+    _, y = jax.lax.scan(step, (jnp.zeros_like(x[0]), seen0), x)
     return jnp.moveaxis(y, 0, axis).astype(dt)
+
+
+def _time_axis(axis, ndim: int, name: str, shape) -> int:
+    """Validate a static time axis (any integer-like value, not the component axis)."""
+    try:
+        ax = operator.index(axis)
+    except TypeError:
+        ax = None
+    if ax is None or isinstance(axis, bool) or not -ndim <= ax < ndim or ax % ndim == ndim - 1:
+        raise ValueError(
+            f"axis must be an integer indexing a time axis of {name} with shape {tuple(shape)} "
+            f"other than the last, got {axis!r}"
+        )
+    return ax % ndim
+
+
+# --- Euler-angle accelerations -----------------------------------------------------------------
+
+
+def _rate_derivative_terms(E, rates, seq):
+    """``(dE/dt) @ rates`` from the columns ``c_n`` of ``E`` (either frame).
+
+    Write ``R`` as the product of its three elementary rotations, outermost first (angle order
+    for an intrinsic ``seq``, reversed for an extrinsic one). A column belonging to an inner
+    factor turns with the angular velocity of the factors outside it, so
+    ``dc_inner/dt = sum_outer a_outer' c_outer x c_inner`` in both frames (in the body frame the
+    outer factors turn the inner axes the opposite way, as seen from the body, and the cross
+    product order makes up for it). Hence
+    ``(dE/dt) a' = sum_{outer < inner} a_outer' a_inner' (c_outer x c_inner)``: for angle order
+    ``(0, 1, 2)`` the pairs ``(0, 1), (0, 2), (1, 2)`` with sign ``+1`` (intrinsic) or ``-1``
+    (extrinsic, where the outer factor of each pair is the later angle).
+    """
+    _, intrinsic = parse_seq(seq)
+    c = [E[..., :, n] for n in range(3)]
+    r = [rates[..., n : n + 1] for n in range(3)]
+    acc = (
+        r[0] * r[1] * cross(c[0], c[1])
+        + r[0] * r[2] * cross(c[0], c[2])
+        + r[1] * r[2] * cross(c[1], c[2])
+    )
+    return acc if intrinsic else -acc
+
+
+@public
+def euler_accelerations_to_angular_acceleration(
+    angles, rates, accelerations, seq: str, frame: str = "body"
+):
+    """Angular acceleration of a body whose Euler angles move with the given rates and
+    accelerations.
+
+    Args:
+        angles: ``(..., 3)`` Euler angles in radians, in the order of ``seq``.
+        rates: ``(..., 3)`` angle rates (rad per unit time).
+        accelerations: ``(..., 3)`` angle accelerations (rad per unit time squared). The three
+            arrays broadcast against each other.
+        seq: axis sequence; see :func:`euler_rate_matrix`.
+        frame: ``"body"``: ``alpha = d/dt omega_body``, components in body axes; ``"world"``:
+            ``alpha = d/dt omega_world``, components in world axes. The two are related by
+            ``alpha_world = R @ alpha_body`` (the term ``dR/dt @ omega_body`` vanishes, as
+            ``omega x omega = 0``).
+
+    Returns:
+        ``(..., 3)`` ``alpha = E(a) @ a'' + (dE/dt) @ a'``, with ``E`` the
+        :func:`euler_rate_matrix` and ``(dE/dt) a'`` in closed form: the sum over the pairs of
+        elementary rotations of ``outer rate * inner rate * (c_outer x c_inner)`` (``c`` the
+        columns of ``E``). Smooth and finite everywhere, gimbal lock included.
+    """
+    (a, r, acc), dt = as_float(angles, rates, accelerations)
+    check_shape(a, (3,), "angles")
+    check_shape(r, (3,), "rates")
+    check_shape(acc, (3,), "accelerations")
+    E = _rate_matrix(a, seq, frame)
+    return (matvec(E, acc) + _rate_derivative_terms(E, r, seq)).astype(dt)
+
+
+@public
+def angular_acceleration_to_euler_accelerations(
+    angles, rates, alpha, seq: str, frame: str = "body", damping=0.0
+):
+    """Euler-angle accelerations that produce the angular acceleration ``alpha``.
+
+    Args:
+        angles: ``(..., 3)`` Euler angles in radians, in the order of ``seq``.
+        rates: ``(..., 3)`` angle rates (rad per unit time).
+        alpha: ``(..., 3)`` angular acceleration in ``frame`` (see
+            :func:`euler_accelerations_to_angular_acceleration`). The three arrays broadcast.
+        seq: axis sequence; see :func:`euler_rate_matrix`.
+        frame: ``"body"`` or ``"world"``.
+        damping: ``(...)`` non-negative damping ``d``, traced, as in
+            :func:`angular_velocity_to_euler_rates`: ``0`` gives the exact
+            ``E^-1 (alpha - (dE/dt) a')``, ``d > 0`` the damped least-squares solution of
+            ``E a'' = alpha - (dE/dt) a'``.
+
+    Returns:
+        ``(..., 3)`` angle accelerations (rad per unit time squared).
+
+    Note:
+        *At gimbal lock with* ``damping=0`` the result is non-finite, and near lock it grows
+        like ``1/euler_singularity`` (for the part of ``alpha`` the angles cannot follow).
+        With ``damping > 0`` it is finite everywhere, with finite gradients.
+    """
+    (a, r, al), dt = as_float(angles, rates, alpha)
+    check_shape(a, (3,), "angles")
+    check_shape(r, (3,), "rates")
+    check_shape(al, (3,), "alpha")
+    d = jnp.asarray(damping).astype(a.dtype)
+    E = _rate_matrix(a, seq, frame)
+    return _inverse_rates(a, al - _rate_derivative_terms(E, r, seq), seq, frame, d).astype(dt)
+
+
+# --- attitude from sampled angular velocity ----------------------------------------------------
+
+SAMPLE_METHODS = ("hold", "trapezoid", "magnus4")
+
+# Gauss-Legendre nodes of the two-point rule on [0, 1] (Magnus 4: Iserles & Norsett 1999).
+_GAUSS = (0.5 - np.sqrt(3.0) / 6.0, 0.5 + np.sqrt(3.0) / 6.0)
+
+
+def _gauss_weights(n_samples: int):
+    """Lagrange weights that interpolate the two Gauss nodes of each step from samples.
+
+    Step ``k`` (from sample ``k`` to ``k + 1``) uses ``p = min(4, n_samples)`` consecutive
+    samples starting at ``s_k = clip(k - 1, 0, n_samples - p)``: centred (a cubic through
+    ``k - 1 .. k + 2``) inside, one-sided at the two ends. Returns the start indices ``(T,)``
+    and the weights ``(T, 2, p)`` in float64.
+    """
+    p = min(4, n_samples)
+    k = np.arange(n_samples - 1)
+    start = np.clip(k - 1, 0, n_samples - p)
+    nodes = (k - start)[:, None] + np.asarray(_GAUSS)[None, :]  # (T, 2), stencil coordinates
+    x = np.arange(p, dtype=np.float64)
+    w = np.ones(nodes.shape + (p,))
+    for j in range(p):
+        for m in range(p):
+            if m != j:
+                w[..., j] *= (nodes - x[m]) / (x[j] - x[m])
+    return start, w
+
+
+def _step_rotvecs(w, h, frame, method):
+    """Rotation vectors ``phi_k`` of the steps, ``q_{k+1} = q_k exp(phi_k)`` (body) or
+    ``exp(phi_k) q_k`` (world); ``w`` is ``(T + 1, ..., 3)``, ``h`` broadcasts against it."""
+    # Magnus series of q' = q (w, 0) / 2 (body) or (w, 0) q / 2 (world). For two samples
+    # a (earlier) and b (later) the commutator term is the body-frame coning correction
+    # + c h^2 (a x b) (Bortz's phi' = w + phi x w / 2), and its mirror - c h^2 (a x b) in the
+    # world frame, where the composition order flips.
+    sign = 1.0 if frame == "body" else -1.0
+    if method == "hold":
+        return h * w[:-1]
+    if method == "trapezoid":
+        # w linear between samples: exact Magnus terms up to order 2 give c = 1/12.
+        a, b = w[:-1], w[1:]
+        return h * (a + b) / 2 + (sign / 12) * h * h * cross(a, b)
+    start, weights = _gauss_weights(w.shape[0])
+    wts = jnp.asarray(weights, w.dtype).reshape(weights.shape + (1,) * (w.ndim - 1))
+    a = b = jnp.zeros_like(w[:-1])
+    for j in range(weights.shape[-1]):  # one gathered copy of the log per stencil point
+        wj = w[start + j]
+        a = a + wts[:, 0, j] * wj  # w at the first Gauss node
+        b = b + wts[:, 1, j] * wj
+    # Fourth-order Magnus with Gauss nodes: Omega = h/2 (A1 + A2) + sqrt(3)/12 h^2 [A2, A1].
+    return h * (a + b) / 2 + (sign * float(np.sqrt(3.0)) / 12) * h * h * cross(a, b)
+
+
+@public
+def integrate_angular_velocity_samples(
+    q0, omega, dt, frame: str = "body", method: str = "magnus4", scalar_first: bool = False
+):
+    """Attitude history from angular-velocity samples (a gyro log) taken at equal intervals.
+
+    Args:
+        q0: ``(..., 4)`` attitude at the first sample time; need not be unit.
+        omega: ``(T + 1, ..., 3)`` angular velocity in ``frame`` sampled at ``t0 + k dt``,
+            ``k = 0 .. T`` (time on axis 0, batch dimensions after it, broadcasting against
+            ``q0``), in rad per unit time.
+        dt: sample interval, a scalar or ``(...)`` broadcasting against the batch; any sign.
+        frame: ``"body"`` (gyro axes, ``q' = q * (omega, 0) / 2``) or ``"world"``
+            (``q' = (omega, 0) * q / 2``).
+        method: how ``omega`` is read between samples:
+
+            * ``"hold"``: each sample held over the step that follows it, ``q_{k+1} =
+              q_k exp(omega_k dt)`` (the last sample is not used). First order on smooth data.
+            * ``"trapezoid"``: ``omega`` linear between samples, with the commutator (coning)
+              term; second order.
+            * ``"magnus4"`` (default): fourth-order Magnus step with two Gauss nodes, ``omega``
+              at the nodes from a cubic through the four nearest samples (one-sided at the
+              ends); fourth order. With fewer than four samples the cubic becomes a polynomial
+              through all of them.
+        scalar_first: quaternions are ``(w, x, y, z)``.
+
+    Returns:
+        ``(T + 1, ..., 4)`` unit quaternions at the sample times, in the layout of ``q0``; the
+        first is ``q0`` normalised. Consecutive outputs are continuous (no hemisphere is
+        imposed).
+
+    Note:
+        Each step is an exact rotation (an exponential map, whose Taylor branch keeps values
+        and gradients exact at ``omega = 0``), so the norm does not drift. The steps are
+        composed with ``lax.associative_scan``: depth ``O(log T)``. The zero ``q0`` gives NaN;
+        a NaN sample affects the attitudes from the steps that read it onwards.
+    """
+    q, w, out_dt = _propagation_args(q0, omega, frame, method, SAMPLE_METHODS, "q0")
+    if w.ndim < 2:
+        raise ValueError(f"omega: expected shape (T + 1, ..., 3), got {tuple(w.shape)}")
+    h = jnp.asarray(dt).astype(q.dtype)
+    q = _normalize(to_scalar_last(q, scalar_first))
+    batch = jnp.broadcast_shapes(q.shape[:-1], w.shape[1:-1], h.shape)
+    q = jnp.broadcast_to(q, batch + (4,))
+    w = jnp.broadcast_to(w, w.shape[:1] + batch + (3,))
+    if w.shape[0] == 1:
+        return from_scalar_last(q[None], scalar_first).astype(out_dt)
+    h = jnp.broadcast_to(h, batch)[None, ..., None]
+    dq = _rotvec_to_quat(_step_rotvecs(w, h, frame, method))  # (T, ..., 4)
+    if frame == "body":  # q_k = q0 dq_0 ... dq_{k-1}
+        prods = jax.lax.associative_scan(_multiply, dq, axis=0)
+        qs = _multiply(q[None], prods)
+    else:  # q_k = dq_{k-1} ... dq_0 q0
+        prods = jax.lax.associative_scan(lambda x, y: _multiply(y, x), dq, axis=0)
+        qs = _multiply(prods, q[None])
+    out = jnp.concatenate([q[None], _normalize(qs)], axis=0)
+    return from_scalar_last(out, scalar_first).astype(out_dt)
+
+
+# --- quaternion sign continuity ----------------------------------------------------------------
+
+
+@public
+def unwrap_quaternion(q, axis: int = 0, scalar_first: bool = False):
+    """Quaternion time series with consecutive samples in the same hemisphere.
+
+    Args:
+        q: ``(..., T, ..., 4)`` quaternions; need not be unit. The last axis holds the
+            components.
+        axis: the time axis (any integer-like value, any axis but the last).
+        scalar_first: quaternions are ``(w, x, y, z)`` (the layout is kept).
+
+    Returns:
+        Array of the same shape, each sample ``q_k`` or ``-q_k`` (the same rotation), such that
+        ``q_k . q_{k+1} >= 0`` between consecutive finite samples. The first finite sample
+        keeps its sign. A dot product of exactly 0 keeps the sign.
+
+    Note:
+        Samples with a NaN or infinite component are returned unchanged and skipped: the sign
+        of the next finite sample is chosen against the last finite sample before it, so a bad
+        sample neither flips nor poisons the rest of the series. Implemented with a cumulative
+        maximum (the last finite index) and a cumulative product of signs: no sequential loop.
+    """
+    (x,), dt = as_float(q)
+    check_shape(x, (4,), "q")
+    axis = _time_axis(axis, x.ndim, "q", x.shape)
+    x = jnp.moveaxis(x, axis, 0)
+    n = x.shape[0]
+    if n == 0:
+        return jnp.moveaxis(x, 0, axis).astype(dt)
+    ok = jnp.all(jnp.isfinite(x), axis=-1)  # (T, ...)
+    idx = jnp.arange(n).reshape((n,) + (1,) * (ok.ndim - 1))
+    last = jax.lax.cummax(jnp.where(ok, idx, -1), axis=0)  # last finite index <= k
+    prev = jnp.concatenate([jnp.full_like(last[:1], -1), last[:-1]], axis=0)  # < k
+    ref = jnp.take_along_axis(x, jnp.maximum(prev, 0)[..., None], axis=0)
+    dot = jnp.sum(jnp.where(ok[..., None], x, 0.0) * jnp.where(prev[..., None] >= 0, ref, 0.0), -1)
+    sign = jnp.where(dot < 0, -1.0, 1.0).astype(x.dtype)
+    flips = jnp.cumprod(sign, axis=0)
+    return jnp.moveaxis(x * flips[..., None], 0, axis).astype(dt)

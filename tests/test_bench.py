@@ -1,12 +1,11 @@
 """Correctness of the speed/accuracy trade-off points and of the benchmark itself (no timing).
 
-The references are the ones the benchmark uses (``rotjax._bench``): mpmath at 40 digits on the
-exact values of the (rounded) inputs.
+The references are the ones the benchmark uses (``rotjax._bench.accuracy``): mpmath at 40
+digits on the exact values of the (rounded) inputs.
 """
 
 from __future__ import annotations
 
-import json
 import warnings
 
 import jax
@@ -18,7 +17,10 @@ from helpers import SEQS, ulp
 from jax.test_util import check_grads
 
 import rotjax as rj
-from rotjax import _bench as B
+from rotjax._bench import accuracy as A
+from rotjax._bench import cases as C
+from rotjax._bench import cli
+from rotjax._bench import report as R
 
 CLEAN_SETS = ["uniform", "near_identity", "near_180", "exact_180", "ties"]
 # Documented componentwise bounds in eps on rotation matrices (see matrix_to_quaternion).
@@ -27,7 +29,7 @@ M2Q_BOUND = {"shepperd": 2.0, "markley": 2.0, "optimal": 2.0}
 
 @pytest.fixture(scope="module")
 def qsets():
-    return B._quaternion_sets(np.random.default_rng(5), 16)
+    return A.quaternion_sets(np.random.default_rng(5), 16)
 
 
 def _mp_quaternions(q):
@@ -39,14 +41,14 @@ def _mp_quaternions(q):
 @pytest.mark.parametrize("method", ["shepperd", "markley", "optimal"])
 def test_matrix_to_quaternion_within_bound(qsets, method, set_name, dtype):
     if set_name == "gimbal":
-        _, q = B._gimbal_set(np.random.default_rng(1), 2, ["xyz", "ZXZ"], 0.0, 1e-12)
+        _, q = A.gimbal_set(np.random.default_rng(1), 2, ["xyz", "ZXZ"], 0.0, 1e-12)
     else:
         q = qsets[set_name]
-    R = np.asarray(jnp.asarray(B._np_matrix(q), dtype=dtype)).astype(np.float64)
-    ref = np.array([[float(c) for c in B._mp_optimal_quaternion(r)] for r in R])
+    R = np.asarray(jnp.asarray(A.np_matrix(q), dtype=dtype)).astype(np.float64)
+    ref = np.array([[float(c) for c in A.mp_optimal_quaternion(r)] for r in R])
     got = rj.matrix_to_quaternion(jnp.asarray(R, dtype=dtype), method=method)
     assert got.dtype == dtype
-    err = B._quat_err(np.asarray(got, np.float64), ref) / ulp(dtype)
+    err = A.quat_err(np.asarray(got, np.float64), ref) / ulp(dtype)
     assert np.all(np.isfinite(err))
     assert err.max() <= M2Q_BOUND[method], f"{method} {set_name}: {err.max():.2f} eps"
 
@@ -54,7 +56,7 @@ def test_matrix_to_quaternion_within_bound(qsets, method, set_name, dtype):
 def _backward_errors(angles, seq, q_ref):
     return np.array(
         [
-            float(B._mp_angle_between(B._mp_euler_quaternion(a, seq), r))
+            float(A.mp_angle_between(A.mp_euler_quaternion(a, seq), r))
             for a, r in zip(np.asarray(angles, np.float64), q_ref, strict=True)
         ]
     )
@@ -65,8 +67,8 @@ def _backward_errors(angles, seq, q_ref):
 def test_euler_backward_error_every_set(qsets, seq, dtype):
     """Backward error <= 5 eps (float64) / 7 eps (float32), exact and near gimbal lock too."""
     rng = np.random.default_rng(SEQS.index(seq))  # deterministic per sequence
-    _, g_exact = B._gimbal_set(rng, 4, [seq], 0.0, 1e-12)
-    _, g_near = B._gimbal_set(rng, 4, [seq], 1e-9, 1e-7)
+    _, g_exact = A.gimbal_set(rng, 4, [seq], 0.0, 1e-12)
+    _, g_near = A.gimbal_set(rng, 4, [seq], 1e-9, 1e-7)
     some = [qsets[k][:6] for k in ("uniform", "near_identity", "near_180")]
     q = np.concatenate([*some, g_exact, g_near])
     q = np.asarray(jnp.asarray(q, dtype=dtype)).astype(np.float64)
@@ -75,8 +77,8 @@ def test_euler_backward_error_every_set(qsets, seq, dtype):
     assert ang.dtype == dtype
     err = _backward_errors(ang, seq, _mp_quaternions(q))
     assert err.max() <= bound, f"quaternion_to_euler {seq}: {err.max() / ulp(dtype):.2f} eps"
-    R = np.asarray(jnp.asarray(B._np_matrix(q), dtype=dtype)).astype(np.float64)
-    ref = [B._mp_optimal_quaternion(r) for r in R]
+    R = np.asarray(jnp.asarray(A.np_matrix(q), dtype=dtype)).astype(np.float64)
+    ref = [A.mp_optimal_quaternion(r) for r in R]
     err = _backward_errors(rj.matrix_to_euler(jnp.asarray(R, dtype=dtype), seq), seq, ref)
     assert err.max() <= bound, f"matrix_to_euler {seq}: {err.max() / ulp(dtype):.2f} eps"
 
@@ -85,7 +87,7 @@ def test_scipy_loses_accuracy_near_gimbal_lock():
     """What the benchmark's peer rows show: scipy's lock threshold costs ~1e8-1e9 eps."""
     from scipy.spatial.transform import Rotation
 
-    seq_of, q = B._gimbal_set(np.random.default_rng(3), 8, ["xyz", "ZXZ"], 1e-9, 1e-7)
+    seq_of, q = A.gimbal_set(np.random.default_rng(3), 8, ["xyz", "ZXZ"], 1e-9, 1e-7)
     worst_scipy, worst_ours = 0.0, 0.0
     for seq in ("xyz", "ZXZ"):
         idx = [i for i, s in enumerate(seq_of) if s == seq]
@@ -104,10 +106,10 @@ def test_scipy_loses_accuracy_near_gimbal_lock():
 @pytest.mark.parametrize("sigma", [1e-8, 1e-4, 1e-2])
 def test_noisy_matrices_ordering(sigma):
     """Error against the optimal quaternion: optimal <= markley <= shepperd, over a batch."""
-    R = B._noisy(np.random.default_rng(11), 48, sigma)
-    ref = np.array([[float(c) for c in B._mp_optimal_quaternion(r)] for r in R])
+    R = A.noisy(np.random.default_rng(11), 48, sigma)
+    ref = np.array([[float(c) for c in A.mp_optimal_quaternion(r)] for r in R])
     err = {
-        m: B._quat_err(np.asarray(rj.matrix_to_quaternion(R, method=m)), ref)
+        m: A.quat_err(np.asarray(rj.matrix_to_quaternion(R, method=m)), ref)
         for m in ("shepperd", "markley", "optimal")
     }
     med = {m: np.median(e) for m, e in err.items()}
@@ -124,14 +126,14 @@ def test_low_precision_inputs(qsets, dtype):
     eps = float(jnp.finfo(dtype).eps)
     q = np.concatenate([qsets[k] for k in CLEAN_SETS])
     with np.errstate(under="ignore"):  # near-identity entries flush to zero in float16
-        R_low = jnp.asarray(B._np_matrix(q), dtype=dtype)
+        R_low = jnp.asarray(A.np_matrix(q), dtype=dtype)
         q_low = jnp.asarray(q, dtype=dtype)
     R = np.asarray(R_low.astype(jnp.float64))
     got = rj.matrix_to_quaternion(R_low)
     assert got.dtype == dtype
-    ref = np.array([[float(c) for c in B._mp_optimal_quaternion(r)] for r in R])
+    ref = np.array([[float(c) for c in A.mp_optimal_quaternion(r)] for r in R])
     # components in [-1, 1]: one rounding to the output dtype, at most half an eps
-    assert B._quat_err(np.asarray(got.astype(jnp.float64)), ref).max() <= 0.5 * eps * (1 + 1e-3)
+    assert A.quat_err(np.asarray(got.astype(jnp.float64)), ref).max() <= 0.5 * eps * (1 + 1e-3)
     ang = rj.quaternion_to_euler(q_low, "ZYX")
     assert ang.dtype == dtype
     err = _backward_errors(
@@ -185,26 +187,146 @@ def test_shepperd_gradients_fwd_and_rev_through_rotvec():
 
 
 def test_quick_benchmark_writes_json(tmp_path):
-    """The CI mode runs end to end (two operations here, to keep the test short)."""
-    rc = B.main(
+    """The CI mode runs end to end (two operations here, to keep the test short); its batch
+    stays in cache, so no copy baseline is reported."""
+    rc = cli.main(
         ["--quick", "--out", str(tmp_path), "--ops", "matrix_to_quaternion,quaternion_to_euler"]
     )
     assert rc == 0
-    data = json.loads((tmp_path / "bench.json").read_text())
-    assert data["meta"]["quick"] is True
-    assert data["meta"]["device"].startswith(jax.default_backend() + ": ")
-    assert data["meta"]["malloc_env"]["MALLOC_MMAP_THRESHOLD_"] is not None
-    rows = data["rows"]
-    assert rows and all(set(r) == set(B.COLUMNS) for r in rows)
+    meta, rows = R.load(tmp_path / "bench.json")
+    assert meta["quick"] is True and meta["batch"] == 1 << 16
+    assert meta["device"].startswith(jax.default_backend() + ": ")
+    assert meta["malloc_env"]["MALLOC_MMAP_THRESHOLD_"] is not None
+    assert meta["versions"]["jax"] == jax.__version__
+    assert rows and all(set(r) == set(R.COLUMNS) for r in rows)
     m2q = [r for r in rows if r["op"] == "matrix_to_quaternion" and r["dtype"] == "float32"]
     assert {r["method"] for r in m2q if r["impl"] == "rotjax"} == {"shepperd", "markley", "optimal"}
-    assert any(r["impl"] == "copy" for r in m2q)
+    assert not any(r["impl"] == "copy" or r["vs_copy"] is not None for r in rows)
     for r in rows:
         assert r["mrot_s"] > 0
         if r["impl"] == "rotjax":
             assert r["err_max_eps"] is not None and r["err_by_set"]
     assert (tmp_path / "bench.txt").read_text().startswith("operation")
-    assert (tmp_path / "bench.png").exists()
+    assert R.plot_digest(tmp_path / "bench.png") == R.digest(meta, rows)
+
+
+def test_copy_baseline_at_a_bandwidth_bound_batch(tmp_path):
+    """At 2^20 rotations (past the caches) quaternion_to_matrix, which writes 9 floats per
+    rotation, runs at a sane fraction of the copy kernel that moves the same bytes: a copy
+    kernel doing more or less than a copy moves this ratio out of range."""
+    args = ["--quick", "--out", str(tmp_path), "--ops", "quaternion_to_matrix"]
+    assert cli.main([*args, "--log2-batch", "20"]) == 0
+    _, rows = R.load(tmp_path / "bench.json")
+    copy = [r for r in rows if r["impl"] == "copy"]
+    assert {r["dtype"] for r in copy} == {"float32", "float64"}
+    for r in rows:
+        if r["impl"] == "rotjax":
+            assert 0.05 <= r["vs_copy"] <= 1.5, r
+
+
+def test_copy_kernel_reads_every_input_and_writes_the_output_width():
+    from rotjax._bench.timing import copy_kernel
+
+    for n_in, n_out in ((9, 4), (4, 9), (4, 3), (3, 4), (7, 4)):
+        x = jnp.zeros((5, n_in))
+        out = copy_kernel(n_in, n_out)(x)
+        assert out.shape == (5, n_out)
+        # every input value reaches some output
+        jac = jax.jacrev(lambda v, n_in=n_in, n_out=n_out: copy_kernel(n_in, n_out)(v)[0])(x)
+        assert np.all(np.abs(np.asarray(jac[:, 0])).sum(0) > 0), (n_in, n_out)
+
+
+def _synthetic(dtypes=("float32", "float64", "bfloat16", "float16")):
+    """A small bench.json: two operations, rotjax (two methods), two peers and the copy row."""
+    rows = []
+    for op in ("matrix_to_quaternion", "quaternion_to_euler"):
+        for dt in dtypes:
+            for k, (impl, method) in enumerate(
+                [("rotjax", "shepperd"), ("rotjax", "markley"), ("jaxlie", ""), ("scipy", "")]
+            ):
+                r = dict.fromkeys(R.COLUMNS)
+                r.update(op=op, impl=impl, method=method, dtype=dt, mrot_s=100.0 / (k + 1))
+                r.update(vs_copy=0.5 / (k + 1), vs_rotjax=1.0 / (k + 1))
+                r.update(err_max_eps=0.5 + k, err_median_eps=0.25)
+                r["err_by_set"] = {"uniform": {"max": 0.5 + k, "median": 0.25}}
+                r["err_by_set"]["noisy_0.0001"] = {"max": 10.0**k, "median": 1.0}
+                rows.append(r)
+            c = dict.fromkeys(R.COLUMNS)
+            c.update(op=op, impl="copy", method="limit", dtype=dt, mrot_s=200.0, vs_copy=1.0)
+            rows.append(c)
+    meta = {"date": "2000-01-01T00:00:00+00:00", "machine": {"cpu": "TestCPU", "cores": 2}}
+    meta.update(device="cpu: cpu", jax="0.0", batch=1 << 20, quick=False)
+    meta["versions"] = {"jax": "0.0", "numpy": "0.1"}
+    return meta, rows
+
+
+def test_report_generates_and_checks(tmp_path):
+    meta, rows = _synthetic()
+    src = tmp_path / "bench.json"
+    src.write_text(R.dumps(meta, rows))
+    readme = tmp_path / "README.md"
+    readme.write_text(f"intro\n{R.README_START}\nold\n{R.README_END}\nrest\n")
+    out = tmp_path / "docs"
+    argv = ["report", "--json", str(src), "--out", str(out), "--readme", str(readme)]
+    assert cli.main([*argv, "--check"]) == 1  # nothing written yet
+    assert cli.main(argv) == 0
+    assert cli.main([*argv, "--check"]) == 0
+    head = (out / "_generated" / "headline.md").read_text()
+    assert "| matrix_to_quaternion | 100 Mrot/s, 0.5 eps | - | 3x, 2.5 eps | 4x, 3.5 eps |" in head
+    assert "TestCPU" in head and "numpy 0.1" in head and "2000-01-01" in head
+    table = (out / "_generated" / "bench_table.md").read_text()
+    assert table.count("\n| ") == len(rows) + 1  # header and one line per row
+    text = readme.read_text()
+    assert text.startswith("intro\n") and text.endswith(f"{R.README_END}\nrest\n")
+    assert "old" not in text and head in text
+    # a changed JSON makes every generated file stale, and only --check leaves them so
+    next(r for r in rows if r["dtype"] == "float64")["mrot_s"] = 1.0  # a headline cell
+    src.write_text(R.dumps(meta, rows))
+    assert set(R.generate(src, out, readme, check=True)) == {
+        str(out / "_generated" / "bench_table.md"),
+        str(out / "_generated" / "headline.md"),
+        str(readme),
+        str(out / "bench.png"),
+    }
+    assert cli.main([*argv, "--check"]) == 1
+    assert cli.main(argv) == 0 and cli.main([*argv, "--check"]) == 0
+
+
+def test_readme_without_markers_is_left_alone(tmp_path):
+    assert R.readme_block("no markers here\n", "block") is None
+
+
+def test_plot_labels_unique_and_markers_per_dtype():
+    meta, rows = _synthetic()
+    fig = R.figure(meta, rows)
+    try:
+        labels = [t.get_text() for leg in fig.legends for t in leg.get_texts()]
+        assert len(labels) == len(set(labels))
+        assert {"float32", "float64", "bfloat16", "float16"} <= set(labels)
+        assert {"rotjax:shepperd", "rotjax:markley", "jaxlie", "scipy"} <= set(labels)
+        assert len(set(R.MARKERS.values())) == len(R.MARKERS)
+        for ax in fig.axes:
+            assert not ax.texts  # no labels drawn on the points
+            assert "(" in ax.get_xlabel() and "(" in ax.get_ylabel()  # units
+        assert "TestCPU" in fig._suptitle.get_text() and "2000-01-01" in fig._suptitle.get_text()
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+
+
+def test_committed_docs_are_generated_from_bench_json():
+    """docs/_generated/*.md and docs/bench.png are current with docs/bench.json."""
+    from pathlib import Path
+
+    docs = Path(__file__).resolve().parent.parent / "docs"
+    assert R.generate(docs / "bench.json", docs, check=True) == []
+
+
+def test_unknown_operation_is_rejected(tmp_path):
+    with pytest.raises(SystemExit):
+        cli.main(["--quick", "--out", str(tmp_path), "--ops", "matrix_to_quaternion,nope"])
+    assert not (tmp_path / "bench.json").exists()
 
 
 ALL_OPS = [
@@ -220,7 +342,7 @@ ALL_OPS = [
 
 @pytest.fixture(scope="module")
 def small_accuracy():
-    return B._Accuracy(np.random.default_rng(4), 4, 1, "float64", ["xyz", "ZXZ"])
+    return A.Accuracy(np.random.default_rng(4), 4, 1, "float64", ["xyz", "ZXZ"])
 
 
 @pytest.mark.parametrize(("op", "method"), ALL_OPS)
@@ -228,19 +350,14 @@ def test_accuracy_pass_every_operation(small_accuracy, op, method):
     """The benchmark's accuracy pass on each operation, both ways it runs a JAX contender:
     through the throughput executable (sets padded to its batch) and jitted for the sets. Both
     must report every set, finite, within the documented float64 bounds (at most 5 eps)."""
-    fn = next(f for impl, m, f, _ in B._contenders(op, {}) if impl == "rotjax" and m == method)
+    case = C.CASES[op]
+    fn = next(c.fn for c in case.contenders({}) if c.impl == "rotjax" and c.method == method)
     batch = 256  # larger than the sets together (at most 34 rows here)
-    shape = B._input_shape(op)
-    q = B._quats(np.random.default_rng(0), batch)
-    x = {
-        (4,): q,
-        (3, 3): B._np_matrix(q),
-        (3,): 0.7 * q[:, :3],
-        (7,): np.concatenate([q, q[:, :3]], axis=1),
-    }[shape]
+    rng = np.random.default_rng(0)
+    x = C.INPUTS[case.input](rng, A.quats(rng, batch))
     compiled = jax.jit(fn).lower(jnp.asarray(x)).compile()
-    padded = B._accuracy(op, fn, "rotjax", small_accuracy, jnp.float64, compiled, batch)
-    apart = B._accuracy(op, fn, "rotjax", small_accuracy, jnp.float64)
+    padded = A.errors(case, fn, "rotjax", small_accuracy, jnp.float64, compiled, batch)
+    apart = A.errors(case, fn, "rotjax", small_accuracy, jnp.float64)
     assert padded.keys() == apart.keys() and padded
     for k in padded:
         assert len(padded[k]) == len(apart[k]) > 0

@@ -348,7 +348,64 @@ def _every_public(q, r, w, a):
             lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="rk4"),
             (q, w),
         ),
+        "integrate_angular_velocity_samples": (
+            lambda q, w: rj.integrate_angular_velocity_samples(q, w[:4, None], 0.01),
+            (q, w),
+        ),
+        "unwrap_quaternion": (rj.unwrap_quaternion, (q,)),
+        "euler_accelerations_to_angular_acceleration": (
+            lambda a, w: rj.euler_accelerations_to_angular_acceleration(a, w, w[::-1], "ZYX"),
+            (a, w),
+        ),
+        "angular_acceleration_to_euler_accelerations": (
+            lambda a, w: rj.angular_acceleration_to_euler_accelerations(
+                a, w, w[::-1], "ZYX", damping=0.1
+            ),
+            (a, w),
+        ),
+        "partition_coordinates": (lambda r: rj.partition_coordinates(r[:, :2]).influence, (r,)),
+        # the Rotation class and the functions it added
+        "quaternion_to_mrp": (rj.quaternion_to_mrp, (q,)),
+        "mrp_to_quaternion": (rj.mrp_to_quaternion, (w,)),
+        "quaternion_canonical": (rj.quaternion_canonical, (q,)),
+        "quaternion_power": (lambda q: rj.quaternion_power(q, 0.3), (q,)),
+        "quaternion_reduce": (
+            lambda q: rj.quaternion_reduce(q, rj.rotation_group("O", dtype=q.dtype))[0],
+            (q,),
+        ),
+        "rotation_group": (lambda q: rj.rotation_group("I", dtype=q.dtype), (q,)),
+        # orthonormal vector sets: the sensitivity is ill-conditioned where the singular values
+        # of B are (1/zeta), which is the data's conditioning, not the function's precision
+        "wahba_sensitivity": (
+            lambda r: rj.wahba_sensitivity(r, np.broadcast_to(np.eye(3, dtype=r.dtype), r.shape)),
+            (r,),
+        ),
+        "davenport_to_quaternion": (
+            lambda a: rj.davenport_to_quaternion(np.eye(3, dtype=a.dtype)[[0, 2, 0]], a),
+            (a,),
+        ),
+        "quaternion_to_davenport": (
+            lambda q: rj.quaternion_to_davenport(q, np.asarray(_OBLIQUE, q.dtype)),
+            (q,),
+        ),
+        "Rotation": (lambda q: rj.Rotation.from_quat(q).as_euler("XYZ"), (q,)),
+        "Slerp": (
+            lambda q: rj.Slerp(np.arange(8, dtype=q.dtype), rj.Rotation.from_quat(q[:8]))(
+                np.asarray(2.5, q.dtype)
+            ).as_matrix(),
+            (q,),
+        ),
+        "RotationSpline": (
+            lambda q: rj.RotationSpline(np.arange(8, dtype=q.dtype), rj.Rotation.from_quat(q[:8]))(
+                np.linspace(0, 7, 15, dtype=q.dtype), 1
+            ),
+            (q,),
+        ),
     }
+
+
+# Davenport axes with the first and last 2 rad apart (consecutive ones orthogonal).
+_OBLIQUE = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [np.cos(2.0), 0.0, np.sin(2.0)]]
 
 
 def _float32(n):

@@ -603,6 +603,8 @@ def _all_public(a, w, q, R):
         "wR": rj.matrix_derivative_to_angular_velocity(R, R @ R),
         "q1": rj.integrate_angular_velocity(q, w, 0.1, method="rk4"),
         "q2": rj.integrate_angular_velocity(q, w, 0.1, frame="world"),
+        "al": rj.euler_accelerations_to_angular_acceleration(a, w, a, seq, frame="world"),
+        "aa": rj.angular_acceleration_to_euler_accelerations(a, w, a, seq, damping=0.1),
         "q3": rj.integrate_angular_velocity(q, w, 0.1, method="euler"),
     }
 
@@ -717,3 +719,323 @@ def test_frame_error_lists_valid_values():
         rj.euler_rate_matrix(np.zeros(3), "XYZ", frame="inertial")
     with pytest.raises(ValueError, match="exponential.*euler.*rk4"):
         rj.integrate_angular_velocity(np.zeros(4), np.zeros(3), 0.1, method="rk2")
+
+
+# --- attitude from sampled angular velocity -----------------------------------------------------
+
+SAMPLE_METHODS = ["hold", "trapezoid", "magnus4"]
+_MOTION_SEQ = "ZYX"  # intrinsic: R = R_z(a0) R_y(a1) R_x(a2)
+
+
+def _motion(t, frame):
+    """A tumbling motion known in closed form: intrinsic ZYX angles that are smooth functions of
+    time. Returns the attitudes (scalar last, from scipy) and the angular velocity in ``frame``
+    from the angle rates, in plain numpy (columns of E: R_x^T R_y^T e_z, R_x^T e_y, e_x)."""
+    t = np.asarray(t, np.float64)
+    a = np.stack([np.sin(1.3 * t) + 0.4 * t, 0.5 + 0.3 * np.cos(2 * t), 1.7 * t - 0.2 * t**2], -1)
+    ad = np.stack([1.3 * np.cos(1.3 * t) + 0.4, -0.6 * np.sin(2 * t), 1.7 - 0.4 * t], -1)
+    rot = Rotation.from_euler(_MOTION_SEQ, a)
+    c1, s1, c2, s2 = np.cos(a[:, 1]), np.sin(a[:, 1]), np.cos(a[:, 2]), np.sin(a[:, 2])
+    col0 = np.stack([-s1, c1 * s2, c1 * c2], -1)  # R_x(a2)^T R_y(a1)^T e_z
+    col1 = np.stack([0 * c2, c2, -s2], -1)  # R_x(a2)^T e_y
+    w = ad[:, :1] * col0 + ad[:, 1:2] * col1 + ad[:, 2:] * np.array([1.0, 0.0, 0.0])
+    if frame == "world":
+        w = np.einsum("nij,nj->ni", rot.as_matrix(), w)
+    return rot.as_quat(), w
+
+
+def _chordal(q, q_ref):
+    """Largest ``min |q -+ q_ref|`` over samples (about half the angle error, no acos)."""
+    q, q_ref = np.asarray(q, np.float64), np.asarray(q_ref)
+    return np.minimum(np.abs(q - q_ref).max(-1), np.abs(q + q_ref).max(-1)).max()
+
+
+def test_motion_angular_velocity_matches_scipy():
+    """The test motion's closed-form angular velocity agrees with differences of scipy's
+    attitudes (so the order tests below measure the integrators, not the motion)."""
+    t, h = np.linspace(0.0, 2.0, 9), 1e-6
+    for frame in FRAMES:
+        _, w = _motion(t, frame)
+        r0, r1 = (
+            Rotation.from_quat(_motion(t - h, frame)[0]),
+            Rotation.from_quat(_motion(t + h, frame)[0]),
+        )
+        d = (r0.inv() * r1) if frame == "body" else (r1 * r0.inv())
+        np.testing.assert_allclose(d.as_rotvec() / (2 * h), w, atol=1e-8)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize(("method", "order"), [("hold", 1), ("trapezoid", 2), ("magnus4", 4)])
+def test_sample_integration_orders(method, order, frame):
+    """The largest attitude error over [0, 2] shrinks by 2**order when the sample interval
+    halves (observed orders 1, 2, 4, each within 0.25: the sample with the largest error moves
+    as dt halves, so the ratios wobble by up to 0.16 for magnus4)."""
+    errs = []
+    for steps in (16, 32, 64):
+        t = np.linspace(0.0, 2.0, steps + 1)
+        q_true, w = _motion(t, frame)
+        with jax.disable_jit():  # op by op: no compilation per log length
+            q = rj.integrate_angular_velocity_samples(q_true[0], w, 2.0 / steps, frame, method)
+        errs.append(_chordal(q, q_true))
+    observed = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all(np.abs(observed - order) < 0.25), observed
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_trapezoid_commutator_term(frame):
+    """One step with omega linear in time, against a fine-grained fourth-order solution: the
+    commutator (coning) term is 1.7e-3 here, so a missing or mis-signed term fails."""
+    a, b, h = np.array([1.0, 0.0, 0.0]), np.array([0.0, 2.0, 0.0]), 0.1
+    q0 = np.array([0.1, 0.2, -0.3, 0.9])
+    coarse = rj.integrate_angular_velocity_samples(q0, np.stack([a, b]), h, frame, "trapezoid")
+    s = np.linspace(0.0, 1.0, 201)[:, None]
+    fine = rj.integrate_angular_velocity_samples(q0, (1 - s) * a + s * b, h / 200, frame)
+    assert _chordal(coarse[-1], fine[-1]) < 2e-5
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("method", SAMPLE_METHODS)
+def test_samples_constant_omega_exact(method, frame):
+    """For a constant angular velocity every method is the exact exponential."""
+    q0 = rj.quaternion_normalize(jnp.asarray([0.3, -0.2, 0.5, 0.8]))
+    w = jnp.asarray([1.3, -2.1, 0.4])
+    ts = 0.07 * np.arange(9)
+    ws = jnp.broadcast_to(w, (9, 3))
+    q = rj.integrate_angular_velocity_samples(q0, ws, 0.07, frame, method)
+    want = _quat_path(jnp.broadcast_to(q0, (9, 4)), ws, frame, ts[:, None])
+    assert_same_rotation(q, want, atol=1e-14)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_hold_equals_exponential_steps(frame):
+    """ "hold" is the existing one-step exponential integrator, applied sample by sample."""
+    w = jnp.asarray(_rng(21).normal(size=(12, 3)))
+    q0 = jnp.asarray([0.2, 0.0, -0.1, 0.7])  # not unit
+    got = rj.integrate_angular_velocity_samples(q0, w, 0.05, frame, "hold")
+    _, traj = _propagate(rj.quaternion_normalize(q0), w[:-1], 0.05, frame, "exponential")
+    assert_close(got[0], np.asarray(q0) / np.linalg.norm(q0), atol=1e-15)
+    assert_close(got[1:], traj, atol=1e-14)
+
+
+def test_samples_gradient_at_zero_and_generic():
+    """Forward and reverse derivatives match finite differences at omega = 0 (the exp map's
+    Taylor branch) and at a generic log, for every method (and the world frame once)."""
+    q0 = jnp.asarray([0.3, -0.4, 0.1, 0.85])
+
+    @jax.jit
+    def f(w):
+        return jnp.stack(
+            [
+                rj.integrate_angular_velocity_samples(q0, w, 0.1, frame, method)[-1]
+                for method, frame in [(m, "body") for m in SAMPLE_METHODS] + [("magnus4", "world")]
+            ]
+        )
+
+    jacs = jax.jit(lambda x: (jax.jacfwd(f)(x), jax.jacrev(f)(x)))
+    for w in (jnp.zeros((5, 3)), jnp.asarray(_rng(22).normal(size=(5, 3)))):
+        jf, jr = jacs(w)
+        fd = fd_jacobian(f, w, h=1e-6)
+        assert_close(jf, fd, atol=1e-9)
+        assert_close(jr, jf, atol=1e-15)
+        assert np.all(np.abs(jf).max(axis=(1, 2, 3)) > 1e-3)  # not silently zero
+
+
+def test_samples_batch_vmap_scalar_first_float32():
+    """Batch dims after time broadcast against q0, vmap over them agrees, per-element dt
+    broadcasts, scalar_first round-trips, float32 stays float32, strict rank promotion."""
+    rng = _rng(23)
+    w = rng.normal(size=(7, 3, 2, 3))
+    q0 = rng.normal(size=(2, 4))
+    dts = np.array([0.05, 0.1])
+    with jax.numpy_rank_promotion("raise"):
+        q = rj.integrate_angular_velocity_samples(q0, w, dts)
+        assert q.shape == (7, 3, 2, 4)
+        one = rj.integrate_angular_velocity_samples(q0[1], w[:, 2, 1], 0.1)
+        assert_close(q[:, 2, 1], one, atol=1e-14)
+        mapped = jax.vmap(
+            lambda qq, ww, d: rj.integrate_angular_velocity_samples(qq, ww, d),
+            in_axes=(0, 2, 0),
+            out_axes=2,
+        )(q0, w, dts)
+        assert_close(mapped, q, atol=1e-14)
+        sf = rj.integrate_angular_velocity_samples(np.roll(q0, 1, -1), w, dts, scalar_first=True)
+        assert_close(np.roll(sf, -1, -1), q, atol=1e-15)
+        q32 = rj.integrate_angular_velocity_samples(
+            q0.astype(np.float32), w.astype(np.float32), 0.1
+        )
+    assert q32.dtype == jnp.float32
+    q64 = rj.integrate_angular_velocity_samples(q0, w, 0.1)
+    assert_close(q32, q64, atol=2e-6)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_samples_short_logs(n):
+    """One sample returns q0; two or three samples still give unit attitudes (magnus4 then
+    interpolates through all of them)."""
+    w = _rng(24).normal(size=(n, 3))
+    q = rj.integrate_angular_velocity_samples(np.array([0.0, 0.0, 0.0, 2.0]), w, 0.1)
+    assert q.shape == (n, 4)
+    assert_close(q[0], [0.0, 0.0, 0.0, 1.0], atol=0)
+    assert_close(np.linalg.norm(q, axis=-1), 1.0, atol=1e-15)
+
+
+@pytest.mark.parametrize(("method", "first_nan"), [("hold", 4), ("trapezoid", 3), ("magnus4", 1)])
+def test_samples_nan_and_zero_q0(method, first_nan):
+    """A NaN sample reaches the attitudes from the first step that reads it onwards (hold:
+    step 3; trapezoid: step 2; magnus4: every step whose stencil holds it, from step 0) and
+    stays in its own batch element; the zero q0 gives NaN."""
+    w = _rng(25).normal(size=(8, 2, 3))
+    w[3, 0, 1] = np.nan
+    q0 = np.array([0.0, 0.0, 0.0, 1.0])
+    q = np.asarray(rj.integrate_angular_velocity_samples(q0, w, 0.1, method=method))
+    assert np.all(np.isfinite(q[:, 1])) and np.all(np.isfinite(q[:first_nan, 0]))
+    assert np.all(np.isnan(q[first_nan:, 0]))
+    z = rj.integrate_angular_velocity_samples(np.zeros(4), w[:, 1], 0.1, method=method)
+    assert np.all(np.isnan(z))
+
+
+# --- Euler accelerations ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("seq", ALL_SEQS)
+def test_euler_accelerations_match_jvp_and_invert(seq, frame):
+    """alpha = d/dt omega along a(t): jax.jvp of the rate map with tangents (a', a''); the
+    inverse recovers a'' away from lock."""
+    rng = _rng(26)
+    a = _generic_angles(seq, 6, seed=26)
+    r, acc = rng.normal(size=(2, 6, 3))
+    with jax.disable_jit():  # op by op: the primitives compile once for all 58 cases
+        _, want = jax.jvp(
+            lambda x, y: rj.euler_rates_to_angular_velocity(x, y, seq, frame), (a, r), (r, acc)
+        )
+        alpha = rj.euler_accelerations_to_angular_acceleration(a, r, acc, seq, frame)
+        back = rj.angular_acceleration_to_euler_accelerations(a, r, alpha, seq, frame)
+    assert_close(alpha, want, atol=4e-15 * np.abs(want).max())
+    assert_close(back, acc, atol=1e-12)
+
+
+@pytest.mark.parametrize("seq", ["XYZ", "zyx", "ZXZ", "yzy", "313"])
+def test_angular_acceleration_frames_related_by_R(seq):
+    rng = _rng(27)
+    a, r, acc = rng.normal(size=(3, 5, 3))
+    ab = rj.euler_accelerations_to_angular_acceleration(a, r, acc, seq, "body")
+    aw = rj.euler_accelerations_to_angular_acceleration(a, r, acc, seq, "world")
+    R = rj.euler_to_matrix(a, seq)
+    assert_close(aw, np.einsum("nij,nj->ni", R, ab), atol=1e-14)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+@pytest.mark.parametrize("seq", ["XYZ", "zxy", "ZXZ", "xzx", "121"])
+def test_damped_euler_accelerations_at_lock(seq, frame):
+    """At exact lock the damped inverse and its gradients are finite (and not all zero); the
+    exact inverse is not finite there."""
+    a = _lock_angles(seq, seed=28)
+    r, alpha = _rng(28).normal(size=(2, 3, 3))
+
+    def f(a, r, al):
+        return rj.angular_acceleration_to_euler_accelerations(a, r, al, seq, frame, damping=0.1)
+
+    with jax.disable_jit():  # op by op: compiled primitives are shared between the cases
+        out = f(a, r, alpha)
+        grads = jax.jacrev(lambda *x: jnp.sum(f(*x)), argnums=(0, 1, 2))(a, r, alpha)
+        exact = np.asarray(rj.angular_acceleration_to_euler_accelerations(a, r, alpha, seq, frame))
+    assert np.all(np.isfinite(out))
+    for g in grads:
+        assert np.all(np.isfinite(g)) and np.abs(g).max() > 0
+    # Non-finite, or ~1/eps where the lock angle pi/2 is not exact in floating point.
+    assert not np.all(np.isfinite(exact)) or np.abs(exact).max() > 1e12
+
+
+# --- quaternion sign continuity -----------------------------------------------------------------
+
+
+def _smooth_series(n, batch=(), seed=29):
+    """A slowly turning quaternion series (steps of about 0.2 rad) and random sign flips."""
+    rng = _rng(seed)
+    w = 0.2 * rng.normal(size=(n, *batch, 3))
+    q = np.asarray(
+        rj.integrate_angular_velocity_samples(rng.normal(size=(*batch, 4)), w, 1.0, "body", "hold")
+    )
+    flips = rng.choice([-1.0, 1.0], size=(n, *batch, 1))
+    return q, flips
+
+
+@pytest.mark.parametrize("axis", [0, np.int64(1), -2])
+def test_unwrap_quaternion_restores_continuity(axis):
+    q, flips = _smooth_series(20, (3,))
+    x = q * flips
+    ax = int(axis) % 3
+    out = rj.unwrap_quaternion(np.moveaxis(x, 0, ax), axis=axis)
+    out = np.moveaxis(np.asarray(out), ax, 0)
+    assert_close(out, q * flips[:1], atol=0)  # the first sample's sign is kept
+    sf = rj.unwrap_quaternion(np.roll(x, 1, -1), scalar_first=True)
+    assert_close(np.roll(sf, -1, -1), out, atol=0)
+
+
+def test_unwrap_quaternion_nan_stays_local():
+    """A NaN or inf sample is returned as is; the next finite sample is unwrapped against the
+    last finite one, so the rest of the series is what it would be without the bad sample."""
+    q, flips = _smooth_series(12, (2,), seed=30)
+    x = q * flips
+    if np.dot(x[3, 0], x[6, 0]) > 0:  # make the sample after the gap need a flip
+        x[6:, 0] *= -1
+    bad = x.copy()
+    bad[4, 0, 2] = np.inf
+    bad[5, 0] = np.nan
+    bad[0, 1] = np.nan  # a bad first sample: the first finite one keeps its sign
+    out = np.asarray(rj.unwrap_quaternion(bad))
+    keep0 = np.r_[0:4, 6:12]
+    ref0 = np.asarray(rj.unwrap_quaternion(x[keep0, 0]))
+    ref1 = np.asarray(rj.unwrap_quaternion(x[1:, 1]))
+    assert_close(out[keep0, 0], ref0, atol=0)
+    assert_close(out[1:, 1], ref1, atol=0)
+    np.testing.assert_array_equal(out[4:6, 0], bad[4:6, 0])
+    assert np.isnan(out[0, 1]).all()
+
+
+def test_unwrap_quaternion_ties_and_gradient():
+    """A dot product of exactly 0 keeps the sign; the gradient is the sign pattern."""
+    q = jnp.asarray([[0.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0], [-1.0, 0.0, 0.0, 0.1]])
+    out = rj.unwrap_quaternion(q)
+    assert_close(out, q * jnp.asarray([[1.0], [1.0], [-1.0]]), atol=0)
+    g = jax.grad(lambda x: jnp.sum(rj.unwrap_quaternion(x)))(q)
+    assert_close(g, np.array([[1.0], [1.0], [-1.0]]) * np.ones(4), atol=0)
+
+
+def test_unwrap_euler_nan_stays_local():
+    """One NaN sample of unwrap_euler no longer poisons the samples after it."""
+    seq = "ZYX"
+    true = np.cumsum(_rng(31).normal(size=(15, 2, 3)) * 0.4, axis=0)
+    wrapped = _principal(true, seq)
+    bad = wrapped.copy()
+    bad[6, 0, 1] = np.nan
+    out = np.asarray(rj.unwrap_euler(bad, seq, axis=np.int64(0)))
+    keep = np.r_[0:6, 7:15]
+    assert_close(out[keep, 0], rj.unwrap_euler(wrapped[keep, 0], seq), atol=0)
+    assert_close(out[:, 1], rj.unwrap_euler(wrapped[:, 1], seq), atol=0)
+    np.testing.assert_array_equal(out[6, 0], bad[6, 0])
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: rj.unwrap_quaternion(np.zeros((5, 4)), axis=1),
+        lambda: rj.unwrap_quaternion(np.zeros((5, 4)), axis=1.0),
+        lambda: rj.unwrap_quaternion(np.zeros((5, 3))),
+        lambda: rj.integrate_angular_velocity_samples(np.zeros(4), np.zeros((5, 3)), 0.1, "x"),
+        lambda: rj.integrate_angular_velocity_samples(np.zeros(4), np.zeros(3), 0.1),
+        lambda: rj.integrate_angular_velocity_samples(
+            np.zeros(4), np.zeros((5, 3)), 0.1, method="rk4"
+        ),
+        lambda: rj.euler_accelerations_to_angular_acceleration(
+            np.zeros(3), np.zeros(3), np.zeros(2), "XYZ"
+        ),
+        lambda: rj.angular_acceleration_to_euler_accelerations(
+            np.zeros(3), np.zeros(3), np.zeros(3), "XYZ", frame="inertial"
+        ),
+    ],
+)
+def test_new_invalid_arguments_raise(call):
+    with pytest.raises(ValueError):
+        call()

@@ -1,0 +1,270 @@
+"""The operations and their contenders: ``CASES``, the one registry of the benchmark.
+
+A contender maps the operation's input batch to its output in rotjax's convention (scalar-last
+quaternions, angles in the order of the sequence); peers are adapted at the boundary. jaxlie is
+timed in its own layout (``jaxlie``), the adapters serving only the accuracy columns.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from . import accuracy as A
+
+SEQ = "xyz"  # throughput sequence (extrinsic roll-pitch-yaw, jaxlie's); accuracy: all 24
+
+
+class Contender(NamedTuple):
+    impl: str  # "rotjax", a peer's name ("scipy", "jax.scipy", "jaxlie")
+    method: str  # rotjax's method=, or ""
+    fn: Callable  # input batch -> output batch
+    traceable: bool  # jitted and differentiated (False: called on NumPy arrays)
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    """One row group of the benchmark.
+
+    Attributes:
+        op: the operation's name, as in the tables.
+        input: the key of ``INPUTS`` that builds its input batch.
+        contenders: ``peers -> [Contender]``; rotjax's first, its default method first of all.
+        accuracy: ``Evaluator -> {set: absolute errors}`` (see ``accuracy``).
+        quick: part of ``--quick``.
+        low_precision: also measured in bfloat16 and float16 (``--quick``: only if ``quick``).
+        grad: time ``jit(grad(sum(f)))`` too.
+        jaxlie: ``SO3 -> (fn, pre)``: jaxlie's call in its own layout and the conversion of
+            rotjax's input to it, done once outside the timing.
+    """
+
+    op: str
+    input: str
+    contenders: Callable
+    accuracy: Callable
+    quick: bool = False
+    low_precision: bool = False
+    grad: bool = True
+    jaxlie: Callable | None = None
+
+
+# --- inputs: ``(rng, unit quaternions (n, 4) float64) -> float64 batch`` ------------------------
+
+
+def _omega(rng, q):
+    """A quaternion and an angular velocity (rad/s, N(0, I)) side by side: (n, 7)."""
+    return np.concatenate([q, rng.normal(size=(len(q), 3))], axis=1)
+
+
+INPUTS = {
+    "quaternion": lambda rng, q: q,
+    "matrix": lambda rng, q: A.np_matrix(q),
+    "rotvec": lambda rng, q: 0.7 * rng.normal(size=(len(q), 3)),
+    "quaternion_omega": _omega,
+}
+
+
+# --- contenders ------------------------------------------------------------------------------
+
+
+def peers():
+    """Importable peers, by name."""
+    out = {}
+    try:
+        from scipy.spatial.transform import Rotation
+
+        out["scipy"] = Rotation
+    except ImportError:  # pragma: no cover - scipy is a bench extra
+        pass
+    try:
+        from jax.scipy.spatial.transform import Rotation as JRotation
+
+        out["jax.scipy"] = JRotation
+    except ImportError:  # pragma: no cover
+        pass
+    try:
+        import jaxlie
+
+        out["jaxlie"] = jaxlie
+    except ImportError:  # pragma: no cover
+        pass
+    return out
+
+
+def rotjax_fn(name, method="", *args):
+    """rotjax's function ``name`` as a contender: ``f(x, *args, method=method)``."""
+    import rotjax as rj
+
+    fn = getattr(rj, name)
+    kw = {"method": method} if method else {}
+    return Contender("rotjax", method, lambda x: fn(x, *args, **kw), True)
+
+
+def scipy_like(peers, build: str, read: str, *args):
+    """jax.scipy and scipy as ``Rotation.<build>(x).<read>(*args)``."""
+    out = []
+    for name, traceable in (("jax.scipy", True), ("scipy", False)):
+        if name in peers:
+            R = peers[name]
+            out.append(
+                Contender(
+                    name, "", lambda x, R=R: getattr(getattr(R, build)(x), read)(*args), traceable
+                )
+            )
+    return out
+
+
+def jaxlie_reader(peers, read):
+    """jaxlie on scalar-last quaternions: ``read(SO3(wxyz))`` per rotation."""
+    if "jaxlie" not in peers:
+        return []
+    import jax
+    import jax.numpy as jnp
+
+    SO3 = peers["jaxlie"].SO3
+    fn = jax.vmap(lambda v: read(SO3(jnp.roll(v, 1))))
+    return [Contender("jaxlie", "", fn, True)]
+
+
+def jaxlie_builder(peers, build: str):
+    """jaxlie's ``SO3.<build>`` per rotation, returned as scalar-last quaternions."""
+    if "jaxlie" not in peers:
+        return []
+    import jax
+    import jax.numpy as jnp
+
+    fn = getattr(peers["jaxlie"].SO3, build)
+    return [Contender("jaxlie", "", lambda x: jnp.roll(jax.vmap(fn)(x).wxyz, -1, -1), True)]
+
+
+def ordered(*groups):
+    """rotjax first, in the order given, then jax.scipy, jaxlie, scipy (the tables' order)."""
+    rank = {"rotjax": 0, "jax.scipy": 1, "jaxlie": 2, "scipy": 3}
+    return sorted((c for g in groups for c in g), key=lambda c: rank.get(c.impl, 4))
+
+
+def _rpy(r):
+    import jax.numpy as jnp
+
+    rpy = r.as_rpy_radians()  # roll, pitch, yaw are the extrinsic "xyz" angles
+    return jnp.stack([rpy.roll, rpy.pitch, rpy.yaw], axis=-1)
+
+
+def _integrate(method):
+    from .._kinematics import integrate_angular_velocity
+
+    def f(x):
+        return integrate_angular_velocity(x[..., :4], x[..., 4:], 0.01, method=method)
+
+    return Contender("rotjax", method, f, True)
+
+
+# --- jaxlie in its own layout: ``SO3 -> (fn, pre)`` ------------------------------------------
+
+
+def _jaxlie_native(body, pre):
+    def make(SO3):
+        import jax
+
+        return jax.vmap(lambda x: body(SO3, x)), pre
+
+    return make
+
+
+def _roll_first(q):
+    import jax.numpy as jnp
+
+    return jnp.roll(q, 1, axis=-1)
+
+
+def _same(x):
+    return x
+
+
+# --- the registry ----------------------------------------------------------------------------
+
+CASES = {
+    c.op: c
+    for c in [
+        Case(
+            "matrix_to_quaternion",
+            "matrix",
+            lambda p: ordered(
+                [rotjax_fn("matrix_to_quaternion", m) for m in ("shepperd", "markley", "optimal")],
+                scipy_like(p, "from_matrix", "as_quat"),
+                jaxlie_builder(p, "from_matrix"),
+            ),
+            A.matrix_to_quaternion_errors,
+            quick=True,
+            low_precision=True,
+            jaxlie=_jaxlie_native(lambda SO3, R: SO3.from_matrix(R).wxyz, _same),
+        ),
+        Case(
+            "quaternion_to_euler",
+            "quaternion",
+            lambda p: ordered(
+                [rotjax_fn("quaternion_to_euler", "", SEQ)],
+                scipy_like(p, "from_quat", "as_euler", SEQ),
+                jaxlie_reader(p, _rpy),
+            ),
+            A.quaternion_to_euler_errors,
+            quick=True,
+            low_precision=True,
+            jaxlie=_jaxlie_native(lambda SO3, v: SO3(v).as_rpy_radians(), _roll_first),
+        ),
+        Case(
+            "matrix_to_euler",
+            "matrix",
+            lambda p: ordered(
+                [rotjax_fn("matrix_to_euler", "", SEQ)],
+                [c for c in scipy_like(p, "from_matrix", "as_euler", SEQ) if c.impl == "scipy"],
+            ),
+            A.matrix_to_euler_errors,
+        ),
+        Case(
+            "quaternion_to_matrix",
+            "quaternion",
+            lambda p: ordered(
+                [rotjax_fn("quaternion_to_matrix")],
+                scipy_like(p, "from_quat", "as_matrix"),
+                jaxlie_reader(p, lambda r: r.as_matrix()),
+            ),
+            A.quaternion_to_matrix_errors,
+            quick=True,
+            jaxlie=_jaxlie_native(lambda SO3, v: SO3(v).as_matrix(), _roll_first),
+        ),
+        Case(
+            "quaternion_to_rotvec",
+            "quaternion",
+            lambda p: ordered(
+                [rotjax_fn("quaternion_to_rotvec")],
+                scipy_like(p, "from_quat", "as_rotvec"),
+                jaxlie_reader(p, lambda r: r.log()),
+            ),
+            A.quaternion_to_rotvec_errors,
+            jaxlie=_jaxlie_native(lambda SO3, v: SO3(v).log(), _roll_first),
+        ),
+        Case(
+            "rotvec_to_quaternion",
+            "rotvec",
+            lambda p: ordered(
+                [rotjax_fn("rotvec_to_quaternion")],
+                scipy_like(p, "from_rotvec", "as_quat"),
+                jaxlie_builder(p, "exp"),
+            ),
+            A.rotvec_to_quaternion_errors,
+            jaxlie=_jaxlie_native(lambda SO3, v: SO3.exp(v).wxyz, _same),
+        ),
+        Case(
+            "integrate_angular_velocity",
+            "quaternion_omega",
+            lambda p: [_integrate(m) for m in ("euler", "rk4", "exponential")],
+            A.integration_step_errors,
+            quick=True,
+            grad=False,
+        ),
+    ]
+}

@@ -1,0 +1,142 @@
+"""``python -m rotjax bench``: run the benchmark, or regenerate its reports from a JSON file."""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+DEFAULT_OUT = "bench_out"
+# glibc returns large freed buffers to the system and maps fresh ones, so every call would pay
+# page faults for its output: the measurement runs in a child with these pinned.
+MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": str(1 << 30), "MALLOC_TRIM_THRESHOLD_": str(1 << 30)}
+
+RUN_HELP = """\
+Measure every operation, method and dtype against the importable peers (scipy Rotation,
+jax.scipy.spatial.transform.Rotation, jaxlie SO3): jitted throughput (medians over interleaved
+rounds), its fraction of a copy kernel that reads and writes the same bytes, single-call
+latency, compile time, jit(grad) throughput, and the largest and median error in eps against
+mpmath on adversarial sets (near identity, near and at 180 degrees, ties, gimbal lock, noisy
+matrices). Writes bench.json, bench.txt and bench.png into --out.
+
+--quick: a batch of 2^16, three rounds, four operations, few accuracy samples. At that size
+the data stays in cache, so the copy kernel is no bandwidth limit: the %copy column and the
+copy rows are left out (they are reported for batches of 2^20 and more, see --log2-batch).
+"""
+
+REPORT_HELP = """\
+Regenerate, without measuring, the files made from a bench.json: OUT/bench.png,
+OUT/_generated/bench_table.md (every row), OUT/_generated/headline.md (rotjax against the
+peers), and the README block between <!-- headline:start --> and <!-- headline:end --> when the
+README has those markers. --check exits 1 if any of them is out of date (the markdown is
+compared exactly, the plot by the digest of the data it was drawn from).
+"""
+
+
+def _report(argv) -> int:
+    from . import report
+
+    p = argparse.ArgumentParser(
+        prog="python -m rotjax bench report",
+        description=REPORT_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--json", default="docs/bench.json", help="input (default: docs/bench.json)")
+    p.add_argument("--out", default="docs", help="output directory (default: docs)")
+    p.add_argument("--readme", default="README.md", help="README whose headline block is rewritten")
+    p.add_argument("--suffix", default="", help="appended to the output names, e.g. -h100")
+    p.add_argument("--check", action="store_true", help="only check that the files are current")
+    args = p.parse_args(argv)
+    readme = args.readme if not args.suffix else None  # the README shows the main run only
+    stale = report.generate(args.json, args.out, readme, args.suffix, check=args.check)
+    for path in stale:
+        print(f"{'out of date' if args.check else 'wrote'}: {path}", file=sys.stderr)
+    return 1 if args.check and stale else 0
+
+
+def _versions():
+    import importlib.metadata as md
+    import platform
+
+    out = {"python": platform.python_version()}
+    for name in ("rotjax", "jax", "jaxlib", "numpy", "scipy", "jaxlie", "mpmath"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            if name == "rotjax":
+                from .. import __version__
+
+                out[name] = __version__
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[2:] if argv is None else argv)
+    if argv and argv[0] == "report":
+        return _report(argv[1:])
+    p = argparse.ArgumentParser(
+        prog="python -m rotjax bench",
+        description=RUN_HELP,
+        epilog="python -m rotjax bench report --help: regenerate the docs from a JSON file.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--quick", action="store_true", help="small batch and subsets (CI)")
+    p.add_argument(
+        "--out",
+        default=DEFAULT_OUT,
+        help=f"output directory, created if missing (default: ./{DEFAULT_OUT}, git-ignored)",
+    )
+    p.add_argument("--ops", default=None, help="comma-separated subset of operations")
+    p.add_argument(
+        "--log2-batch", type=int, default=None, help="batch of 2^N rotations (default 20; 16 quick)"
+    )
+    args = p.parse_args(argv)
+    from .cases import CASES
+
+    unknown = sorted(set(args.ops.split(",") if args.ops else ()) - set(CASES))
+    if unknown:
+        p.error(f"unknown operations {unknown}; expected some of {sorted(CASES)}")
+    if any(os.environ.get(k) != v for k, v in MALLOC_ENV.items()):
+        # glibc reads these once, at start-up: run the measurement in a child that has them.
+        env = {**os.environ, **MALLOC_ENV}
+        return subprocess.call([sys.executable, "-m", "rotjax", "bench", *argv], env=env)
+    from . import report
+    from .runner import log, machine, run
+
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    import jax
+
+    t0 = time.perf_counter()
+    ops = args.ops.split(",") if args.ops else None
+    rows = run(args.quick, ops, args.log2_batch)
+    versions = _versions()
+    meta = {
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "machine": machine(),
+        "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}",
+        "jax": jax.__version__,
+        "versions": versions,
+        "quick": args.quick,
+        "batch": 1
+        << (args.log2_batch if args.log2_batch is not None else (16 if args.quick else 20)),
+        "malloc_env": {k: os.environ.get(k) for k in MALLOC_ENV},
+        "seconds": round(time.perf_counter() - t0, 1),
+        "columns": list(report.COLUMNS),
+    }
+    text = report.table(rows)  # before the JSON conversion: an infinite error prints as inf
+    for r in rows:  # strict JSON: an infinite error (a NaN result) is written as null
+        for k in ("err_max_eps", "err_median_eps"):
+            if r[k] is not None:
+                r[k] = report.finite_or_none(r[k])
+    (out_dir / "bench.json").write_text(report.dumps(meta, rows))
+    (out_dir / "bench.txt").write_text(text + "\n")
+    print(text)
+    if report.write_plot(meta, rows, out_dir / "bench.png"):
+        log(f"[bench] wrote {out_dir / 'bench.png'}")
+    log(f"[bench] wrote {out_dir / 'bench.json'} in {meta['seconds']} s")
+    return 0

@@ -1,0 +1,56 @@
+"""Modified Rodrigues parameters (MRP): ``p = axis * tan(angle / 4)``."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ._numerics import as_float, check_shape, from_scalar_last, public, to_scalar_last
+
+
+@public
+def quaternion_to_mrp(q, scalar_first: bool = False):
+    """Modified Rodrigues parameters of a quaternion, on the shorter side (``|p| <= 1``).
+
+    Args:
+        q: ``(..., 4)`` quaternion; need not be unit (zero gives NaN).
+        scalar_first: ``q`` is ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 3)`` MRP ``v / (|q| + |w|)`` with the sign of ``w``: ``axis * tan(angle / 4)``
+        for the rotation angle in ``[0, pi]``, as scipy's ``as_mrp``.
+
+    Note:
+        The denominator is at least ``|q|``, so the map is smooth away from ``w = 0``. At
+        exactly 180 degrees (``w = 0``) both ``p`` and ``-p`` (norm 1) describe the rotation;
+        ``w = 0`` is taken as positive, and the gradient is that of that side (finite).
+    """
+    (q,), dt = as_float(q)
+    check_shape(q, (4,), "q")
+    q = to_scalar_last(q, scalar_first)
+    n = jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))  # zero quaternion: 0/0 = NaN
+    w = q[..., 3:]
+    s = jnp.where(w < 0, -1.0, 1.0).astype(q.dtype)
+    return (s * q[..., :3] / (n + s * w)).astype(dt)
+
+
+@public
+def mrp_to_quaternion(mrp, scalar_first: bool = False):
+    """Unit quaternion of modified Rodrigues parameters.
+
+    Args:
+        mrp: ``(..., 3)`` MRP ``axis * tan(angle / 4)``, any norm (``p`` and ``-p / |p|^2`` are
+            the same rotation).
+        scalar_first: return ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 4)`` unit quaternion ``(2 p, 1 - |p|^2) / (1 + |p|^2)`` (``w >= 0`` iff
+        ``|p| <= 1``).
+
+    Note:
+        Smooth everywhere, with no singular point: the denominator is at least 1.
+    """
+    (p,), dt = as_float(mrp)
+    check_shape(p, (3,), "mrp")
+    p2 = jnp.sum(p * p, axis=-1, keepdims=True)
+    q = jnp.concatenate([2 * p, 1 - p2], axis=-1) / (1 + p2)
+    return from_scalar_last(q, scalar_first).astype(dt)

@@ -1,0 +1,1033 @@
+"""``Rotation`` and ``Slerp``: scipy's transform API over rotjax's functions, as pytrees.
+
+The class holds one array, the ``(..., 4)`` scalar-last unit quaternion, and adds scipy's shape
+bookkeeping and method names; every computation is one of rotjax's functions.
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._algebra import (
+    quaternion_canonical,
+    quaternion_power,
+    quaternion_reduce,
+    rotation_group,
+    wahba_sensitivity,
+)
+from ._davenport import davenport_to_quaternion, parse_order, quaternion_to_davenport
+from ._euler import euler_to_quaternion, parse_seq, quaternion_to_euler
+from ._fitting import align_vectors as _align_vectors
+from ._fitting import quaternion_mean
+from ._kinematics import quaternion_derivative_to_angular_velocity
+from ._matrix import matrix_to_quaternion
+from ._mrp import mrp_to_quaternion, quaternion_to_mrp
+from ._numerics import cross, eps, matvec, safe_atan2, to_scalar_last
+from ._quaternion import (
+    angle_between,
+    quaternion_apply,
+    quaternion_conjugate,
+    quaternion_multiply,
+    quaternion_normalize,
+    quaternion_to_matrix,
+    rotation_angle,
+)
+from ._rotvec import quaternion_to_rotvec, rotvec_to_quaternion
+
+
+def _float(x, dtype=None):
+    """``x`` as a JAX float array (integers to the default float; float32/64 kept)."""
+    x = jnp.asarray(x, dtype=dtype)
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(float)
+    return x
+
+
+def _concrete(x) -> np.ndarray | None:
+    """``x`` as NumPy if it is a host value (NumPy array, Python number or list), else ``None``.
+
+    Value checks that scipy makes (negative weights, zero norms) are made only on such inputs:
+    they cost no device transfer, and under ``jit`` the values are never inspected.
+    """
+    if isinstance(x, jax.Array):  # tracers are jax.Array instances too
+        return None
+    try:
+        a = np.asarray(x)
+        return a if np.issubdtype(a.dtype, np.floating) else a.astype(float)
+    except (TypeError, ValueError):
+        return None
+
+
+def _broadcast(*arrays, trailing, what="Cannot broadcast the batch shapes"):
+    """Broadcast the leading (batch) shapes explicitly, so that rank promotion is never
+    implicit; ``trailing`` gives each array's core rank."""
+    try:
+        shape = np.broadcast_shapes(
+            *(a.shape[: a.ndim - t] for a, t in zip(arrays, trailing, strict=True))
+        )
+    except ValueError:
+        shapes = ", ".join(
+            str(a.shape[: a.ndim - t]) for a, t in zip(arrays, trailing, strict=True)
+        )
+        raise ValueError(f"{what} {shapes}") from None
+    return tuple(
+        jnp.broadcast_to(a, shape + a.shape[a.ndim - t :])
+        for a, t in zip(arrays, trailing, strict=True)
+    )
+
+
+@jax.jit
+def _from_matrix_checked(matrix):
+    # scipy raises for det <= 0; a traced function cannot, so those rotations are NaN.
+    q = matrix_to_quaternion(matrix, method="optimal")
+    det = jnp.sum(matrix[..., 0, :] * cross(matrix[..., 1, :], matrix[..., 2, :]), axis=-1)
+    return jnp.where((det > 0)[..., None], q, jnp.nan)
+
+
+@functools.partial(jax.jit, static_argnames=("normalize", "scalar_first"))
+def _prepare_quat(q, normalize, scalar_first):
+    q = to_scalar_last(_float(q), scalar_first)
+    return quaternion_normalize(q) if normalize else q
+
+
+@jax.jit
+def _compose(p, q):
+    p, q = _broadcast(p, q, trailing=(1, 1))
+    return quaternion_normalize(quaternion_multiply(p, q))
+
+
+@functools.partial(jax.jit, static_argnames="inverse")
+def _apply(q, v, inverse):
+    if inverse:
+        q = quaternion_conjugate(q)
+    return quaternion_apply(*_broadcast(q, v, trailing=(1, 1)))
+
+
+def _identity_quat(shape, dtype):
+    return jnp.zeros((*shape, 4), dtype).at[..., 3].set(1)
+
+
+def _is_key(x) -> bool:
+    if isinstance(x, jax.Array):
+        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
+            return True
+        return x.dtype == jnp.uint32 and x.shape == (2,)
+    return False
+
+
+@jax.tree_util.register_pytree_node_class
+class Rotation:
+    """Rotations in 3 dimensions, scipy's ``Rotation`` API on one JAX array.
+
+    A ``Rotation`` holds a ``(..., 4)`` unit quaternion ``[x, y, z, w]`` (scalar last), the
+    only leaf of the pytree: ``jax.jit`` can take and return it, ``jax.vmap`` maps over its
+    leading (batch) axes, ``jax.grad`` differentiates through its methods and ``lax.scan``
+    carries it. A 1-D quaternion is a *single* rotation (``single`` is ``True``; no ``len``, no
+    indexing); ``(..., 4)`` holds a batch of shape ``shape``. float32 and float64 are kept.
+
+    Every method is one of rotjax's functions (``as_euler`` is
+    :func:`quaternion_to_euler`, ``apply`` is :func:`quaternion_apply`, ...), with their
+    accuracy and their gradients at the identity, at 180 degrees and at gimbal lock.
+
+    Conventions (scipy's): ``as_matrix()`` is the active matrix, ``v_world = R @ v_body``;
+    ``p * q`` applies ``q`` first; Euler ``"XYZ"`` is intrinsic, ``"xyz"`` extrinsic.
+
+    Values scipy rejects (zero-norm quaternions, matrices with ``det <= 0``, negative weights,
+    interpolation times out of range) raise ``ValueError`` only when they arrive as NumPy arrays
+    or Python numbers; as JAX arrays, and always under ``jit``, they are not inspected and the
+    result is NaN for the affected rotations.
+
+    Args:
+        quat: ``(..., 4)`` quaternion(s); need not be unit.
+        normalize: normalise ``quat`` (set ``False`` only for unit quaternions).
+        copy: accepted for scipy compatibility (JAX arrays are immutable).
+        scalar_first: ``quat`` is ``[w, x, y, z]``.
+    """
+
+    __slots__ = ("_quat",)
+
+    def __init__(self, quat, normalize: bool = True, copy: bool = True, scalar_first: bool = False):
+        del copy  # JAX arrays are immutable: there is nothing to copy
+        host = _concrete(quat)
+        # Host input goes to the jitted function as it is: one dispatch, no separate transfer.
+        q = host if host is not None else _float(quat)
+        if q.ndim < 1 or q.shape[-1] != 4:
+            raise ValueError(f"Expected `quat` to have shape (..., 4), got {q.shape}.")
+        if host is not None and normalize and not host.any(axis=-1).all():
+            raise ValueError("Found zero norm quaternions in `quat`.")
+        self._quat = _prepare_quat(q, normalize=normalize, scalar_first=scalar_first)
+
+    # --- pytree -------------------------------------------------------------------------
+
+    def tree_flatten(self):
+        return (self._quat,), None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls._raw(children[0])
+
+    @classmethod
+    def _raw(cls, quat):
+        """A rotation holding ``quat`` as it is (no check, no normalisation)."""
+        r = object.__new__(cls)
+        r._quat = quat
+        return r
+
+    def __getstate__(self):
+        return np.asarray(self._quat)
+
+    def __setstate__(self, state):
+        self._quat = jnp.asarray(state)
+
+    # --- shape ---------------------------------------------------------------------------
+
+    @property
+    def single(self) -> bool:
+        """Whether this is a single rotation (a 1-D quaternion)."""
+        return self._quat.ndim == 1
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The batch shape: the quaternion's shape without its last axis."""
+        return tuple(self._quat.shape[:-1])
+
+    @property
+    def quat(self):
+        """The stored ``(..., 4)`` unit quaternion, scalar last (jax.scipy's field)."""
+        return self._quat
+
+    def __len__(self) -> int:
+        """Length of the first batch axis. Raises TypeError for a single rotation."""
+        if self.single:
+            raise TypeError("Single rotation has no len().")
+        return self._quat.shape[0]
+
+    def __bool__(self) -> bool:
+        return True
+
+    def __iter__(self):
+        if self.single:
+            raise TypeError("Single rotation is not iterable.")
+        return (Rotation._raw(self._quat[i]) for i in range(self._quat.shape[0]))
+
+    def _index(self, indexer):
+        if self.single:
+            raise TypeError("Single rotation is not subscriptable.")
+        if isinstance(indexer, tuple):
+            if any(i is Ellipsis for i in indexer):
+                return indexer + (slice(None),)
+            return indexer + (Ellipsis,)
+        return (indexer, Ellipsis)
+
+    def __getitem__(self, indexer) -> Rotation:
+        """Rotations selected by ``indexer`` over the batch axes (as NumPy indexing)."""
+        return Rotation._raw(self._quat[self._index(indexer)])
+
+    def __setitem__(self, indexer, value: Rotation):
+        """Replace the selected rotations by ``value``.
+
+        JAX arrays are immutable: this builds a new quaternion array (``.at[...].set``) and
+        rebinds this object's leaf to it. Other references to the old array, and copies of
+        this object made before (e.g. a pytree flattened earlier), are unchanged.
+        """
+        idx = self._index(indexer)
+        if not isinstance(value, Rotation):
+            raise TypeError("value must be a Rotation object")
+        self._quat = self._quat.at[idx].set(value.as_quat().astype(self._quat.dtype))
+
+    def __repr__(self) -> str:
+        m = repr(np.asarray(self.as_matrix())).splitlines()
+        m[1:] = [" " * 21 + line for line in m[1:]]
+        return "Rotation.from_matrix(" + "\n".join(m) + ")"
+
+    # --- constructors --------------------------------------------------------------------
+
+    @staticmethod
+    def from_quat(quat, *, scalar_first: bool = False) -> Rotation:
+        """From quaternion(s).
+
+        Args:
+            quat: ``(..., 4)`` quaternion(s) ``[x, y, z, w]``; need not be unit (they are
+                normalised; zero gives NaN, or ValueError for NumPy input).
+            scalar_first: ``quat`` is ``[w, x, y, z]``.
+        """
+        return Rotation(quat, scalar_first=scalar_first)
+
+    @staticmethod
+    def from_matrix(matrix, *, assume_valid: bool = False) -> Rotation:
+        """From rotation matrices.
+
+        Args:
+            matrix: ``(..., 3, 3)`` active matrices (``v_world = R @ v_body``). Unless
+                ``assume_valid``, each is replaced by the nearest rotation matrix (Frobenius
+                norm; :func:`matrix_to_quaternion` with ``method="optimal"``) and a matrix with
+                ``det <= 0`` gives NaN (ValueError for NumPy input).
+            assume_valid: the matrices are rotations: use the cheaper ``"shepperd"`` method,
+                with no check.
+        """
+        m = _float(matrix)
+        if m.ndim < 2 or m.shape[-2:] != (3, 3):
+            raise ValueError(f"Expected `matrix` to have shape (..., 3, 3), got {m.shape}")
+        if assume_valid:
+            return Rotation._raw(matrix_to_quaternion(m, method="shepperd"))
+        host = _concrete(matrix)
+        if host is not None and np.any(np.linalg.det(host) <= 0):
+            raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
+        return Rotation._raw(_from_matrix_checked(m))
+
+    @staticmethod
+    def from_rotvec(rotvec, degrees: bool = False) -> Rotation:
+        """From rotation vectors ``angle * axis``.
+
+        Args:
+            rotvec: ``(..., 3)`` rotation vectors (radians, or degrees with ``degrees``).
+            degrees: the norms are in degrees.
+        """
+        v = _float(rotvec)
+        if v.ndim < 1 or v.shape[-1] != 3:
+            raise ValueError(f"Expected `rot_vec` to have shape (..., 3), got {v.shape}")
+        return Rotation._raw(rotvec_to_quaternion(v, degrees=degrees))
+
+    @staticmethod
+    def from_mrp(mrp) -> Rotation:
+        """From modified Rodrigues parameters ``axis * tan(angle / 4)``, shape ``(..., 3)``."""
+        p = _float(mrp)
+        if p.ndim < 1 or p.shape[-1] != 3:
+            raise ValueError(f"Expected `mrp` to have shape (..., 3), got {p.shape}")
+        return Rotation._raw(mrp_to_quaternion(p))
+
+    @staticmethod
+    def from_euler(seq: str, angles, degrees: bool = False) -> Rotation:
+        """From Euler angles about 1 to 3 axes.
+
+        Args:
+            seq: 1 to 3 axis letters, uppercase for intrinsic (rotating axes, ``"ZXZ"``),
+                lowercase for extrinsic (fixed axes, ``"xyz"``); or three digits (``"313"``,
+                intrinsic). Consecutive axes must differ.
+            angles: ``(..., len(seq))`` angles; a scalar for one axis. A 1-D array of length
+                ``len(seq)`` is a single rotation.
+            degrees: angles are in degrees.
+        """
+        if not isinstance(seq, str) or not 1 <= len(seq) <= 3:
+            raise ValueError(
+                "Expected axis specification to be a non-empty string of up to 3 "
+                f"characters, got {seq!r}"
+            )
+        a = _float(angles)
+        if a.ndim == 0:
+            a = a[None]
+        k = len(seq)
+        if a.shape[-1] != k:
+            raise ValueError(
+                "Expected last dimension of `angles` to match number of sequence axes "
+                f"specified, got {a.shape[-1]}."
+            )
+        if k < 3:
+            if not (set(seq) <= set("xyz") or set(seq) <= set("XYZ")):
+                raise ValueError(
+                    f"Expected axes from `seq` to be from ['x', 'y', 'z'] or ['X', 'Y', 'Z'], "
+                    f"got {seq!r}"
+                )
+            if k == 2 and seq[0] == seq[1]:
+                raise ValueError(f"Expected consecutive axes to be different, got {seq!r}")
+            # Pad to three axes with zero angles: the extra elementary rotations are exactly
+            # the identity, so the product is that of the given axes.
+            base = "xyz" if seq.islower() else "XYZ"
+            while len(seq) < 3:
+                seq += next(c for c in base if c != seq[-1])
+            a = jnp.concatenate([a, jnp.zeros(a.shape[:-1] + (3 - k,), a.dtype)], axis=-1)
+        else:
+            parse_seq(seq)
+        return Rotation._raw(euler_to_quaternion(a, seq, degrees=degrees))
+
+    @staticmethod
+    def from_davenport(axes, order: str, angles, degrees: bool = False) -> Rotation:
+        """From Davenport angles: rotations about 1 to 3 given axes.
+
+        Args:
+            axes: ``(K, 3)`` or ``(3,)`` axes (normalised here), ``K`` in 1..3; consecutive
+                axes must be orthogonal.
+            order: ``"e"``/``"extrinsic"`` (fixed axes) or ``"i"``/``"intrinsic"``.
+            angles: ``(..., K)`` angles (a scalar for one axis).
+            degrees: angles are in degrees.
+        """
+        extrinsic = parse_order(order)
+        ax = _float(axes)
+        if ax.shape[-1] != 3:
+            raise ValueError("Axes must be vectors of length 3.")
+        if ax.ndim == 1:
+            ax = ax[None]
+        if not 1 <= ax.shape[-2] <= 3:
+            raise ValueError(f"Expected up to 3 axes, got {ax.shape[-2]}")
+        host = _concrete(axes)
+        if host is not None:
+            h = np.atleast_2d(host)
+            h = h / np.linalg.norm(h, axis=-1, keepdims=True)
+            if np.any(np.abs(np.sum(h[..., :-1, :] * h[..., 1:, :], axis=-1)) > 1e-7):
+                raise ValueError("Consecutive axes must be orthogonal.")
+        a = _float(angles, ax.dtype)
+        if a.ndim == 0:
+            a = a[None]
+        if a.shape[-1] != ax.shape[-2]:
+            raise ValueError(
+                f"Expected `angles` to match number of axes, got {a.shape} angles and "
+                f"{ax.shape} axes."
+            )
+        q = davenport_to_quaternion(ax, a, extrinsic=extrinsic, degrees=degrees)
+        return Rotation._raw(q)
+
+    @staticmethod
+    def identity(num: int | None = None, dtype=None, *, shape=None) -> Rotation:
+        """The identity rotation.
+
+        Args:
+            num: number of rotations (``None``: a single rotation).
+            dtype: float dtype (jax.scipy's second argument); JAX's default float if ``None``.
+            shape: batch shape, instead of ``num``.
+        """
+        if num is not None and shape is not None:
+            raise ValueError("Only one of `num` or `shape` can be specified.")
+        if num is not None:
+            shape = (num,)
+        shape = () if shape is None else ((shape,) if isinstance(shape, int) else tuple(shape))
+        return Rotation._raw(_identity_quat(shape, dtype if dtype is not None else float))
+
+    @staticmethod
+    def random(num=None, rng=None, *, shape=None, random_state=None) -> Rotation:
+        """Uniformly distributed random rotations.
+
+        Args:
+            num: number of rotations (``None``: a single one). A JAX PRNG key here is taken as
+                jax.scipy's ``random(key, num)``.
+            rng: a ``numpy.random.Generator``, a seed for ``numpy.random.default_rng``, or a
+                JAX PRNG key. With NumPy, the samples equal scipy's for the same generator.
+            shape: batch shape, instead of ``num``.
+            random_state: scipy's former name of ``rng``.
+        """
+        if rng is None:
+            rng = random_state
+        if _is_key(num):
+            num, rng = rng, num
+        if num is not None and shape is not None:
+            raise ValueError("Only one of `num` or `shape` can be specified.")
+        if shape is not None and not (
+            isinstance(shape, int)
+            or all(isinstance(s, (int, np.integer)) for s in np.atleast_1d(shape))
+        ):
+            raise ValueError("`shape` must be an int or a tuple of ints")
+        size = (
+            (num,)
+            if num is not None
+            else (() if shape is None else ((shape,) if isinstance(shape, int) else tuple(shape)))
+        )
+        if _is_key(rng):
+            sample = jax.random.normal(rng, (*size, 4), dtype=float)
+        else:
+            gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+            sample = gen.normal(size=(*size, 4))
+        return Rotation(sample)
+
+    @staticmethod
+    def concatenate(rotations) -> Rotation:
+        """Concatenate rotations along the first batch axis (single ones count as one)."""
+        if isinstance(rotations, Rotation):
+            return Rotation._raw(rotations._quat)
+        rotations = list(rotations)
+        if not all(isinstance(r, Rotation) for r in rotations):
+            raise TypeError("input must contain Rotation objects only")
+        return Rotation._raw(jnp.concatenate([jnp.atleast_2d(r._quat) for r in rotations]))
+
+    @classmethod
+    def create_group(cls, group: str, axis: str = "Z") -> Rotation:
+        """A finite rotation group: ``"Cn"``, ``"Dn"``, ``"T"``, ``"O"`` or ``"I"``.
+
+        See :func:`rotation_group`; ``axis`` (``"X"``, ``"Y"``, ``"Z"``) is the principal axis
+        of ``Cn`` and ``Dn``.
+        """
+        return cls._raw(rotation_group(group, axis))
+
+    @staticmethod
+    def align_vectors(a, b, weights=None, return_sensitivity: bool = False):
+        """Rotation that best maps vectors ``b`` onto ``a`` (Wahba's problem).
+
+        Minimises ``sum_i w_i |a_i - R b_i|^2`` (:func:`align_vectors`). One infinite weight
+        (or a single vector pair) makes that pair primary: it is aligned exactly (the
+        smallest rotation taking ``b_i`` to ``a_i``), and the rotation about ``a_i`` minimises
+        the secondary pairs' loss (scipy's rule).
+
+        Args:
+            a: ``(N, 3)`` or ``(3,)`` vectors in the reference frame.
+            b: ``(N, 3)`` or ``(3,)`` the same vectors in the body frame.
+            weights: ``(N,)`` non-negative weights (at most one infinite); ``None`` for ones.
+            return_sensitivity: also return the sensitivity matrix
+                (:func:`wahba_sensitivity`); not defined with an infinite weight or one pair.
+
+        Returns:
+            ``(rotation, rssd)`` or ``(rotation, rssd, sensitivity)``: the single rotation, the
+            root of the weighted sum of squared distances ``|a_i - R b_i|`` (infinite weights
+            counting as 0) and the ``(3, 3)`` sensitivity matrix.
+        """
+        a_in, b_in = _float(a), _float(b)
+        dt = jnp.result_type(a_in.dtype, b_in.dtype)
+        a2, b2 = jnp.atleast_2d(a_in.astype(dt)), jnp.atleast_2d(b_in.astype(dt))
+        for x, x0, name in ((a2, a_in, "a"), (b2, b_in, "b")):
+            if x.shape[-1] != 3 or x.ndim > 2:
+                raise ValueError(
+                    f"Expected input `{name}` to have shape (3,) or (N, 3), got {x0.shape}"
+                )
+        if a2.shape != b2.shape:
+            raise ValueError(
+                "Expected inputs `a` and `b` to have same shapes, got "
+                f"{a_in.shape} and {b_in.shape} respectively."
+            )
+        n = a2.shape[0]
+        if weights is None:
+            w = jnp.ones(n, dt)
+        else:
+            w = _float(weights, dt)
+            if w.ndim != 1:
+                raise ValueError(f"Expected `weights` to be 1 dimensional, got shape {w.shape}.")
+            if n > 1 and w.shape[0] != n:
+                raise ValueError(
+                    "Expected `weights` to have number of values equal to number of input "
+                    f"vectors, got {w.shape[0]} values and {n} vectors."
+                )
+            host = _concrete(weights)
+            if host is not None:
+                if np.any(host < 0):
+                    raise ValueError("`weights` may not contain negative values")
+                if np.sum(np.isinf(host)) > 1:
+                    raise ValueError("Only one infinite weight is allowed")
+                if return_sensitivity and (n == 1 or np.any(np.isinf(host))):
+                    raise ValueError(
+                        "Cannot return sensitivity matrix with an infinite weight or one "
+                        "vector pair"
+                    )
+        if return_sensitivity and n == 1:
+            raise ValueError(
+                "Cannot return sensitivity matrix with an infinite weight or one vector pair"
+            )
+        q, rssd = _align(a2, b2, w)
+        rot = Rotation._raw(q)
+        if return_sensitivity:
+            return rot, rssd, wahba_sensitivity(a2, b2, w)
+        return rot, rssd
+
+    # --- conversions ---------------------------------------------------------------------
+
+    def as_quat(self, canonical: bool = False, *, scalar_first: bool = False):
+        """The unit quaternion(s), ``(..., 4)``.
+
+        Args:
+            canonical: pick the sign with ``w > 0`` (and, where ``w = 0``, the first non-zero
+                of ``x, y, z`` positive); otherwise the stored sign.
+            scalar_first: return ``[w, x, y, z]``.
+        """
+        q = quaternion_canonical(self._quat) if canonical else self._quat
+        return to_scalar_last(q, False) if not scalar_first else jnp.roll(q, 1, axis=-1)
+
+    def as_matrix(self):
+        """Active rotation matrices, ``(..., 3, 3)`` (``v_world = R @ v_body``)."""
+        return quaternion_to_matrix(self._quat)
+
+    def as_rotvec(self, degrees: bool = False):
+        """Rotation vectors ``angle * axis`` with angle in ``[0, pi]``, ``(..., 3)``."""
+        return quaternion_to_rotvec(self._quat, degrees=degrees)
+
+    def as_mrp(self):
+        """Modified Rodrigues parameters with norm at most 1, ``(..., 3)``."""
+        return quaternion_to_mrp(self._quat)
+
+    def as_euler(self, seq: str, degrees: bool = False, *, suppress_warnings: bool = False):
+        """Euler angles, ``(..., 3)``, in scipy's ranges (see :func:`quaternion_to_euler`).
+
+        Args:
+            seq: three axes, ``"XYZ"``-style intrinsic, ``"xyz"``-style extrinsic, or digits.
+            degrees: return degrees.
+            suppress_warnings: accepted for scipy compatibility: rotjax has no gimbal-lock
+                threshold and never warns (at exact lock the third angle is 0, as scipy).
+        """
+        del suppress_warnings
+        if not isinstance(seq, str) or len(seq) != 3:
+            raise ValueError(f"Expected 3 axes, got {seq!r}.")
+        parse_seq(seq)
+        return quaternion_to_euler(self._quat, seq, degrees=degrees)
+
+    def as_davenport(self, axes, order: str, degrees: bool = False, *, suppress_warnings=False):
+        """Davenport angles about three axes, consecutive ones orthogonal, ``(..., 3)``.
+
+        Args:
+            axes: ``(..., 3, 3)`` the axes as rows; batch shape broadcasts with ``shape``.
+            order: ``"e"``/``"extrinsic"`` or ``"i"``/``"intrinsic"``.
+            degrees: return degrees.
+            suppress_warnings: accepted for scipy compatibility (no gimbal-lock warning).
+
+        Returns:
+            Angles in scipy's ranges (see :func:`quaternion_to_davenport`).
+        """
+        del suppress_warnings
+        extrinsic = parse_order(order)
+        ax = _float(axes, self._quat.dtype)
+        if ax.ndim < 2 or ax.shape[-2] != 3:
+            raise ValueError(f"Expected 3 axes, got {ax.shape}.")
+        if ax.shape[-1] != 3:
+            raise ValueError("Axes must be vectors of length 3.")
+        try:
+            np.broadcast_shapes(ax.shape[:-2], self.shape)
+        except ValueError:
+            raise ValueError(
+                f"Expected `axes` to match number of rotations, got {ax.shape} axes and "
+                f"{self._quat.shape} rotations."
+            ) from None
+        host = _concrete(axes)
+        if host is not None:
+            h = host / np.linalg.norm(host, axis=-1, keepdims=True)
+            if np.any(np.abs(np.sum(h[..., :-1, :] * h[..., 1:, :], axis=-1)) > 1e-7):
+                raise ValueError("Consecutive axes must be orthogonal.")
+        return quaternion_to_davenport(self._quat, ax, extrinsic=extrinsic, degrees=degrees)
+
+    # --- algebra -------------------------------------------------------------------------
+
+    def __mul__(self, other):
+        """Composition ``self * other``: ``other`` applied first; batch shapes broadcast."""
+        if not isinstance(other, Rotation):
+            return NotImplemented
+        # The shapes are checked here, so that the error is scipy's ValueError.
+        np_shapes = (self.shape, other.shape)
+        try:
+            np.broadcast_shapes(*np_shapes)
+        except ValueError:
+            raise ValueError(
+                f"Cannot broadcast {np_shapes[0]} rotations in first to {np_shapes[1]} "
+                "rotations in second object."
+            ) from None
+        return Rotation._raw(_compose(self._quat, other._quat))
+
+    def __pow__(self, n, modulus=None) -> Rotation:
+        """Fractional power: ``n`` times the rotation angle about the same axis.
+
+        ``n`` is a scalar (an array of shape ``()`` or ``(1,)``); see :func:`quaternion_power`.
+        ``r ** 1`` is ``r`` up to the quaternion's sign (``w >= 0``), ``r ** 0`` the identity
+        exactly.
+        """
+        if modulus is not None:
+            raise NotImplementedError("modulus not supported")
+        e = jnp.asarray(n)
+        if e.shape == (1,):
+            e = e[0]
+        if e.ndim != 0:
+            raise ValueError("Array exponent must be a scalar")
+        e = jnp.broadcast_to(e.astype(self._quat.dtype), self.shape)
+        return Rotation._raw(quaternion_power(self._quat, e))
+
+    def inv(self) -> Rotation:
+        """The inverse rotation(s)."""
+        return Rotation._raw(quaternion_conjugate(self._quat))
+
+    def apply(self, vectors, inverse: bool = False):
+        """Rotate vectors: ``R @ v`` (``R.T @ v`` with ``inverse``).
+
+        Args:
+            vectors: ``(..., 3)`` vectors; batch shapes broadcast with the rotations'.
+            inverse: apply the inverse rotation.
+
+        Returns:
+            ``(..., 3)`` rotated vectors, in the rotation's dtype.
+        """
+        host = _concrete(vectors)
+        v = host.astype(self._quat.dtype) if host is not None else _float(vectors, self._quat.dtype)
+        if v.ndim < 1 or v.shape[-1] != 3:
+            raise ValueError(f"Expected input of shape (..., 3), got {v.shape}.")
+        try:
+            np.broadcast_shapes(self.shape, v.shape[:-1])
+        except ValueError:
+            raise ValueError(
+                f"Cannot broadcast {self.shape} rotations to {v.shape[:-1]} vectors."
+            ) from None
+        return _apply(self._quat, v, inverse=inverse)
+
+    def magnitude(self):
+        """Rotation angles in ``[0, pi]``, shape ``shape``."""
+        return rotation_angle(self._quat)
+
+    def approx_equal(self, other: Rotation, atol=None, degrees: bool = False):
+        """Whether the angle between the rotations is below ``atol`` (default 1e-8 rad)."""
+        if atol is None:
+            if degrees:
+                warnings.warn(
+                    "atol must be set to use the degrees flag, defaulting to 1e-8 radians.",
+                    stacklevel=2,
+                )
+            atol = 1e-8
+        elif degrees:
+            atol = np.deg2rad(atol)
+        p, q = _broadcast(
+            self._quat,
+            other._quat,
+            trailing=(1, 1),
+            what="Expected broadcastable shapes in both rotations, got",
+        )
+        return angle_between(p, q) < atol
+
+    def mean(self, weights=None, axis=None) -> Rotation:
+        """Weighted mean rotation (Markley et al. 2007; :func:`quaternion_mean`).
+
+        Args:
+            weights: non-negative weights broadcastable to ``shape``; ``None`` for ones.
+            axis: batch axis or axes to reduce; ``None`` for all.
+        """
+        q = jnp.atleast_2d(self._quat)
+        nb = q.ndim - 1
+        if q.shape[0] == 0:
+            raise ValueError("Mean of an empty rotation set is undefined.")
+        axes = tuple(range(nb)) if axis is None else ((axis,) if isinstance(axis, int) else axis)
+        if not isinstance(axes, tuple):
+            raise ValueError("`axis` must be None, int, or tuple of ints.")
+        if axes and (min(axes) < -nb or max(axes) > nb - 1):
+            raise ValueError(f"axis {axis} is out of bounds for rotation with shape {self.shape}.")
+        axes = tuple(sorted({a % nb for a in axes}))
+        keep = tuple(i for i in range(nb) if i not in axes)
+        if weights is None:
+            w = None
+        else:
+            host = _concrete(weights)
+            if host is not None and np.any(host < 0):
+                raise ValueError("`weights` must be non-negative.")
+            w = _float(weights, q.dtype)
+            try:
+                w = jnp.broadcast_to(w, q.shape[:-1])
+            except ValueError:
+                raise ValueError(
+                    "Expected `weights` to be broadcastable to rotation shape, got shape "
+                    f"{w.shape} for {q.shape[:-1]} rotations."
+                ) from None
+            w = jnp.where(w < 0, jnp.nan, w)
+            w = jnp.reshape(jnp.transpose(w, keep + axes), [q.shape[i] for i in keep] + [-1])
+        qt = jnp.transpose(q, keep + axes + (nb,))
+        qt = jnp.reshape(qt, [q.shape[i] for i in keep] + [-1, 4])
+        return Rotation._raw(quaternion_mean(qt, w))
+
+    def reduce(self, left=None, right=None, return_indices: bool = False):
+        """Reduce by groups: ``l * self * r`` with the smallest angle (see
+        :func:`quaternion_reduce`).
+
+        Args:
+            left: a ``Rotation`` holding the left group, or ``None``.
+            right: a ``Rotation`` holding the right group, or ``None``.
+            return_indices: also return the indices of the chosen ``l`` and ``r`` (``None``
+                for an absent group).
+        """
+        if left is None and right is None:
+            reduced, li, ri = self, None, None
+        else:
+            lq = None if left is None else jnp.atleast_2d(left._quat)
+            rq = None if right is None else jnp.atleast_2d(right._quat)
+            q, li, ri = quaternion_reduce(self._quat, lq, rq)
+            reduced = Rotation._raw(q)
+            li = None if left is None else li
+            ri = None if right is None else ri
+        if return_indices:
+            return reduced, li, ri
+        return reduced
+
+
+@jax.jit
+def _align(a, b, w):
+    """``align_vectors`` with scipy's infinite-weight rule; ``(N, 3)``, ``(N, 3)``, ``(N,)``."""
+    n = a.shape[0]
+    inf = jnp.isinf(w) | (n == 1)
+    bad = (jnp.sum(jnp.isinf(w)) > 1) | jnp.any(w < 0)
+    w_fin = jnp.where(inf, 0.0, w)
+    # Least squares over all pairs (used when no weight is infinite).
+    q_svd = _align_vectors(a, b, jnp.where(jnp.isinf(w), 1.0, w))
+    # The primary pair, aligned exactly by the smallest rotation.
+    k = jnp.argmax(inf)
+    ap, bp = a[k], b[k]
+    ap = ap / jnp.sqrt(jnp.sum(ap * ap))
+    bp = bp / jnp.sqrt(jnp.sum(bp * bp))
+    c = 1 + jnp.sum(ap * bp)
+    # Antiparallel: any axis perpendicular to a serves; the coordinate axis least aligned with
+    # a gives a well-conditioned cross product.
+    e = jnp.eye(3, dtype=a.dtype)[jnp.argmin(jnp.abs(ap))]
+    anti = c <= 8 * eps(a.dtype)
+    vec = jnp.where(anti, cross(ap, e), cross(bp, ap))
+    q_pri = quaternion_normalize(jnp.concatenate([vec, jnp.where(anti, 0.0, c)[None]]))
+    # The rotation about a_p that best aligns the secondary pairs (scipy's 2-D problem).
+    cs = quaternion_apply(jnp.broadcast_to(q_pri, (n, 4)), b)
+    apn = ap[None, :]
+    sin = jnp.sum(cross(cs, a) * apn, axis=-1)
+    cos = jnp.sum(cs * a, axis=-1) - jnp.sum(cs * apn, axis=-1) * jnp.sum(a * apn, axis=-1)
+    phi = safe_atan2(jnp.sum(w_fin * sin), jnp.sum(w_fin * cos))
+    q_fix = quaternion_multiply(rotvec_to_quaternion(phi * ap), q_pri)
+    q = jnp.where(jnp.any(inf), q_fix, q_svd)
+    q = jnp.where(bad, jnp.nan, q)
+    d = a - quaternion_apply(jnp.broadcast_to(q, (n, 4)), b)
+    # A single finite-weight pair keeps its weight in the residual (scipy's rule).
+    w_res = w if n == 1 else w_fin
+    w_res = jnp.where(jnp.isinf(w_res), 0.0, w_res)
+    ss = jnp.sum(w_res * jnp.sum(d * d, axis=-1))
+    pos = ss > 0
+    rssd = jnp.where(pos, jnp.sqrt(jnp.where(pos, ss, 1.0)), 0.0)  # cone at 0: gradient 0 there
+    rssd = jnp.where(jnp.isnan(ss), jnp.nan, rssd)
+    return q, rssd
+
+
+def _keyframe_times(times, rotations, dim_msg, order_msg):
+    """Keyframe times as a 1-D array matching ``rotations`` (scipy's checks and messages)."""
+    if rotations._quat.ndim > 2:
+        raise ValueError("Rotations with more than 1 leading dimension are not supported.")
+    t = _float(times, rotations._quat.dtype)
+    if t.ndim != 1:
+        raise ValueError(dim_msg)
+    if t.shape[0] != len(rotations):
+        raise ValueError(
+            "Expected number of rotations to be equal to number of timestamps given, got "
+            f"{len(rotations)} rotations and {t.shape[0]} timestamps."
+        )
+    host = _concrete(times)
+    if host is not None and np.any(np.diff(host) <= 0):
+        raise ValueError(order_msg)
+    return t
+
+
+@jax.tree_util.register_pytree_node_class
+class Slerp:
+    """Spherical linear interpolation between keyframe rotations (scipy's and jax.scipy's).
+
+    Between consecutive keyframes the rotation turns at constant angular rate about a fixed
+    axis: ``r_i * exp(alpha * log(r_i^-1 r_(i+1)))``. A pytree (``times``, ``timedelta``,
+    ``rotations``, ``rotvecs``), so it can be built and called under ``jit``.
+
+    Args:
+        times: ``(N,)`` strictly increasing keyframe times, ``N >= 2``.
+        rotations: a ``Rotation`` of shape ``(N,)``.
+    """
+
+    __slots__ = ("times", "timedelta", "rotations", "rotvecs")
+
+    def __init__(self, times, rotations: Rotation):
+        if not isinstance(rotations, Rotation):
+            raise TypeError("`rotations` must be a `Rotation` instance.")
+        if rotations.single or len(rotations) == 1:
+            raise ValueError("`rotations` must be a sequence of at least 2 rotations.")
+        t = _keyframe_times(
+            times,
+            rotations,
+            f"Expected times to be specified in a 1 dimensional array, got {np.ndim(times)} "
+            "dimensions.",
+            "Times must be in strictly increasing order.",
+        )
+        self.times = t
+        self.timedelta = jnp.diff(t)
+        self.rotations = rotations
+        self.rotvecs = (rotations[:-1].inv() * rotations[1:]).as_rotvec()
+
+    @classmethod
+    def init(cls, times, rotations: Rotation) -> Slerp:
+        """jax.scipy's constructor: the same as ``Slerp(times, rotations)``."""
+        return cls(times, rotations)
+
+    def tree_flatten(self):
+        return (self.times, self.timedelta, self.rotations, self.rotvecs), None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        s = object.__new__(cls)
+        s.times, s.timedelta, s.rotations, s.rotvecs = children
+        return s
+
+    def __call__(self, times) -> Rotation:
+        """Interpolated rotations at ``times`` (scalar: a single rotation; ``(...)``: that
+        batch shape). Times outside ``[times[0], times[-1]]`` give NaN (ValueError for NumPy
+        input)."""
+        t = _float(times, self.times.dtype)
+        if t.ndim > 1:
+            raise ValueError("`times` must be at most 1-dimensional.")
+        host = _concrete(times)
+        if (
+            host is not None
+            and host.size
+            and not isinstance(self.times, jax.core.Tracer)  # keyframes traced: not checked
+            and (
+                np.any(host < np.asarray(self.times[0]))
+                or np.any(host > np.asarray(self.times[-1]))
+            )
+        ):
+            raise ValueError(
+                f"Interpolation times must be within the range [{float(self.times[0])}, "
+                f"{float(self.times[-1])}], both inclusive."
+            )
+        return Rotation._raw(
+            _slerp_eval(self.times, self.timedelta, self.rotations._quat, self.rotvecs, t)
+        )
+
+
+@jax.jit
+def _slerp_eval(times, timedelta, quat, rotvecs, t):
+    n = times.shape[0]
+    idx = jnp.clip(jnp.searchsorted(times, t, side="right") - 1, 0, n - 2)
+    alpha = (t - times[idx]) / timedelta[idx]
+    alpha = jnp.where((t < times[0]) | (t > times[-1]), jnp.nan, alpha)
+    step = rotvec_to_quaternion(alpha[..., None] * rotvecs[idx])
+    return quaternion_multiply(quat[idx], step)
+
+
+# --- RotationSpline ----------------------------------------------------------------------
+#
+# On segment i (times t_i .. t_i+1, length h_i) the rotation is R_i exp(phi(tau)) with the
+# cubic rotation vector phi(tau) = c3 tau^3 + c2 tau^2 + w_i tau, phi(h_i) = r_i (the relative
+# rotation vector to R_i+1) and phi'(h_i) = A(r_i) w_i+1, where w_k is the body angular rate at
+# knot k and A(r) maps body rates to rotation-vector rates (its inverse, B(r), is the Jacobian
+# of the body rate of exp(r)). Continuity of the angular acceleration at the interior knots,
+#   2/h_i B(r_i) w_i + 4 (1/h_i + 1/h_i+1) w_i+1 + 2/h_i+1 A(r_i+1) w_i+2
+#       = 6 (r_i / h_i^2 + r_i+1 / h_i+1^2) - N(r_i, A(r_i) w_i+1),
+# with N the part of the angular acceleration quadratic in phi', is solved by fixed-point
+# iteration on N (scipy's RotationSpline; end rates w_0 = r_0 / h_0 and w_n = r_n-1 / h_n-1).
+# B and N come from differentiating rotvec_to_quaternion and the body angular velocity.
+
+
+def _body_rate(phi, phi_dot):
+    """Body angular velocity of ``exp(phi)`` moving at ``phi_dot``."""
+    q, dq = jax.jvp(rotvec_to_quaternion, (phi,), (phi_dot,))
+    return quaternion_derivative_to_angular_velocity(q, dq, frame="body")
+
+
+def _rate_jacobian(phi):
+    """``B(phi)``: ``body_rate = B(phi) @ phi_dot``; ``(3,)`` to ``(3, 3)``."""
+    return jax.jacfwd(lambda v: _body_rate(phi, v))(jnp.zeros_like(phi))
+
+
+def _quadratic_term(phi, phi_dot):
+    """``N(phi, phi_dot)``: the angular acceleration's term quadratic in ``phi_dot``."""
+    return jax.jvp(lambda p: _body_rate(p, phi_dot), (phi,), (phi_dot,))[1]
+
+
+_SPLINE_ITERATIONS = 10
+
+
+@jax.jit
+def _spline_coefficients(times, quat):
+    h = jnp.diff(times)
+    r = quaternion_to_rotvec(quaternion_multiply(quaternion_conjugate(quat[:-1]), quat[1:]))
+    n = r.shape[0]  # segments
+    w_first, w_last = r[0] / h[0], r[-1] / h[-1]
+    B = jax.vmap(_rate_jacobian)(r)
+    A = jnp.linalg.inv(B)
+    if n == 1:
+        w = jnp.stack([w_first, w_last])
+    else:
+        m = n - 1  # interior knots
+        eye = jnp.eye(3, dtype=r.dtype)
+        M = jnp.zeros((m, 3, m, 3), r.dtype)
+        k = jnp.arange(m)
+        M = M.at[k, :, k, :].set((4 * (1 / h[:-1] + 1 / h[1:]))[:, None, None] * eye)
+        if m > 1:
+            M = M.at[k[1:], :, k[:-1], :].set(2 / h[1:-1, None, None] * B[1:-1])
+            M = M.at[k[:-1], :, k[1:], :].set(2 / h[1:-1, None, None] * A[1:-1])
+        M = M.reshape(3 * m, 3 * m)
+        b0 = 6 * (r[:-1] / h[:-1, None] ** 2 + r[1:] / h[1:, None] ** 2)
+        b0 = b0.at[0].add(-2 / h[0] * matvec(B[0], w_first))
+        b0 = b0.at[-1].add(-2 / h[-1] * matvec(A[-1], w_last))
+        w_int = jnp.broadcast_to(r[:-1] / h[:-1, None], (m, 3))  # start: the chord rates
+
+        def step(_, w_int):
+            w_end = jnp.concatenate([w_int, w_last[None]])
+            rdot = matvec(A, w_end)
+            rhs = b0 - jax.vmap(_quadratic_term)(r[:-1], rdot[:-1])
+            return jnp.linalg.solve(M, rhs.reshape(-1)).reshape(m, 3)
+
+        w_int = jax.lax.fori_loop(0, _SPLINE_ITERATIONS, step, w_int)
+        w = jnp.concatenate([w_first[None], w_int, w_last[None]])
+    rdot = matvec(A, w[1:])
+    hh = h[:, None]
+    c3 = (-2 * r + hh * w[:-1] + hh * rdot) / hh**3
+    c2 = (3 * r - 2 * hh * w[:-1] - hh * rdot) / hh**2
+    return c3, c2, w[:-1]
+
+
+@jax.tree_util.register_pytree_node_class
+class RotationSpline:
+    """Cubic rotation spline with continuous angular rate and acceleration (scipy's).
+
+    Interpolates keyframe rotations by a cubic in the rotation vector relative to each
+    keyframe, with the angular rates at the knots chosen to make the angular acceleration
+    continuous (Sec. 4 of the scipy reference; the end rates are those of the end chords).
+    Construction and evaluation are jittable (a fixed number of fixed-point iterations and a
+    dense linear solve of size ``3 (N - 2)``). A pytree.
+
+    Args:
+        times: ``(N,)`` strictly increasing times, ``N >= 2``.
+        rotations: a ``Rotation`` of shape ``(N,)``.
+    """
+
+    __slots__ = ("times", "rotations", "_coeffs")
+
+    def __init__(self, times, rotations: Rotation):
+        if not isinstance(rotations, Rotation) or rotations.single:
+            raise ValueError("`rotations` must be a sequence of rotations.")
+        if len(rotations) == 1:
+            raise ValueError("`rotations` must contain at least 2 rotations.")
+        t = _keyframe_times(
+            times,
+            rotations,
+            "`times` must be 1-dimensional.",
+            "Values in `times` must be in a strictly increasing order.",
+        )
+        self.times = t
+        self.rotations = rotations
+        self._coeffs = _spline_coefficients(t, rotations._quat)
+
+    def tree_flatten(self):
+        return (self.times, self.rotations, self._coeffs), None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        s = object.__new__(cls)
+        s.times, s.rotations, s._coeffs = children
+        return s
+
+    def __call__(self, times, order: int = 0):
+        """Rotations (``order=0``), angular rates (1, rad/s) or angular accelerations (2).
+
+        Args:
+            times: scalar or ``(M,)`` times; outside the knots the end cubics extrapolate.
+            order: 0, 1 or 2.
+
+        Returns:
+            A ``Rotation``, or ``(..., 3)`` rates/accelerations: the angular velocity of
+            ``R(t)`` expressed in the frame of the keyframe ``R_i`` that starts the segment
+            (scipy's convention), and its time derivative.
+        """
+        if order not in (0, 1, 2):
+            raise ValueError("`order` must be 0, 1 or 2.")
+        t = _float(times, self.times.dtype)
+        if t.ndim > 1:
+            raise ValueError("`times` must be at most 1-dimensional.")
+        out = _spline_eval(self.times, self.rotations._quat, self._coeffs, t, order)
+        return Rotation._raw(out) if order == 0 else out
+
+
+@functools.partial(jax.jit, static_argnames="order")
+def _spline_eval(times, quat, coeffs, t, order):
+    c3, c2, c1 = coeffs
+    idx = jnp.clip(jnp.searchsorted(times, t, side="right") - 1, 0, times.shape[0] - 2)
+
+    def phi(tau):
+        return ((c3[idx] * tau[..., None] + c2[idx]) * tau[..., None] + c1[idx]) * tau[..., None]
+
+    tau = t - times[idx]
+    if order == 0:
+        return quaternion_multiply(quat[idx], rotvec_to_quaternion(phi(tau)))
+
+    def rate(tau):
+        p, pdot = jax.jvp(phi, (tau,), (jnp.ones_like(tau),))
+        return _body_rate(p, pdot)
+
+    if order == 1:
+        return rate(tau)
+    return jax.jvp(rate, (tau,), (jnp.ones_like(tau),))[1]

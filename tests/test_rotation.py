@@ -1,0 +1,389 @@
+"""rotjax.Rotation and Slerp against scipy's, and their behaviour as pytrees."""
+
+import pickle
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import random_quaternions
+from scipy.spatial.transform import Rotation as SR
+from scipy.spatial.transform import Slerp as SSlerp
+
+import rotjax
+from rotjax import Rotation, Slerp
+
+Q = random_quaternions(6, seed=3)  # (6, 4), not unit
+V = np.random.default_rng(4).normal(size=(6, 3))
+
+
+def same_rotation(q1, q2, atol):
+    """Quaternions equal up to sign, rotation by rotation."""
+    q1, q2 = np.asarray(q1), np.asarray(q2)
+    d = np.minimum(np.abs(q1 - q2).max(axis=-1), np.abs(q1 + q2).max(axis=-1))
+    np.testing.assert_array_less(d, atol)
+
+
+RANK_SAFE = {
+    "mul_broadcast": lambda: (Rotation.from_quat(Q) * Rotation.from_quat(Q[0])).as_quat(),
+    "apply_broadcast": lambda: Rotation.from_quat(Q[:1]).apply(V),
+    "apply_single": lambda: Rotation.from_quat(Q[0]).apply(V),
+    "align_vectors_inf": lambda: Rotation.align_vectors(V, V[::-1], [np.inf] + [1.0] * 5)[1],
+    "reduce": lambda: Rotation.from_quat(Q).reduce(Rotation.create_group("T")).as_quat(),
+    "from_davenport": lambda: Rotation.from_davenport(np.eye(3), "e", V).as_quat(),
+    "from_euler_1": lambda: Rotation.from_euler("x", V[:, :1]).as_quat(),
+    "pow": lambda: (Rotation.from_quat(Q) ** 0.5).as_quat(),
+}
+
+
+@pytest.mark.parametrize("name", sorted(RANK_SAFE))
+def test_class_broadcasting_under_rank_promotion_raise(name):
+    # The class's own broadcasting is explicit. (The whole module can run under "raise" once
+    # every core function is rank-promotion safe.)
+    with jax.numpy_rank_promotion("raise"):
+        assert np.all(np.isfinite(RANK_SAFE[name]()))
+
+
+# --- conversions against scipy --------------------------------------------------------
+
+AS = {
+    "as_quat": lambda r: r.as_quat(),
+    "as_quat_canonical_sf": lambda r: r.as_quat(canonical=True, scalar_first=True),
+    "as_matrix": lambda r: r.as_matrix(),
+    "as_rotvec_deg": lambda r: r.as_rotvec(degrees=True),
+    "as_mrp": lambda r: r.as_mrp(),
+    "as_euler_ZXZ": lambda r: r.as_euler("ZXZ"),
+    "as_euler_xyz_deg": lambda r: r.as_euler("xyz", degrees=True),
+    "magnitude": lambda r: r.magnitude(),
+    "apply": lambda r: r.apply(V),
+    "apply_inverse": lambda r: r.apply(V, inverse=True),
+    "inv": lambda r: r.inv().as_matrix(),
+    "pow_0.3": lambda r: (r**0.3).as_matrix(),
+    "pow_-2": lambda r: (r**-2).as_matrix(),
+    "mul": lambda r: (r * r[::-1]).as_matrix(),
+    "mean": lambda r: r.mean().as_matrix(),
+    "mean_weights": lambda r: r.mean(weights=np.arange(1.0, 7.0)).as_matrix(),
+    "davenport": lambda r: r.as_davenport(np.eye(3)[[2, 0, 2]], "e"),
+    "mean_axis": lambda r: type(r).from_quat(r.as_quat().reshape(2, 3, 4)).mean(axis=1).as_matrix(),
+}
+
+
+@pytest.mark.parametrize("name", sorted(AS))
+def test_methods_match_scipy(name):
+    f = AS[name]
+    np.testing.assert_allclose(f(Rotation.from_quat(Q)), f(SR.from_quat(Q)), atol=1e-13)
+
+
+FROM = {
+    "from_quat_sf": ("from_quat", (Q,), {"scalar_first": True}),
+    "from_matrix": ("from_matrix", (SR.from_quat(Q).as_matrix() * 1.01,), {}),
+    "from_matrix_valid": ("from_matrix", (SR.from_quat(Q).as_matrix(),), {"assume_valid": True}),
+    "from_rotvec": ("from_rotvec", (V * 30,), {"degrees": True}),
+    "from_mrp": ("from_mrp", (V,), {}),
+    "from_euler_3": ("from_euler", ("zyz", V), {}),
+    "from_euler_2": ("from_euler", ("XY", V[:, :2]), {}),
+    "from_euler_1": ("from_euler", ("y", V[:, :1]), {"degrees": True}),
+    "from_euler_1_scalar": ("from_euler", ("Z", 0.4), {}),
+    "from_davenport": ("from_davenport", (np.eye(3)[[0, 2, 1]], "i", V), {}),
+    "from_davenport_oblique": (
+        "from_davenport",
+        ([[1.0, 0, 0], [0, 1, 1], [1, 0, 0]], "extrinsic", V),
+        {},
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FROM))
+def test_constructors_match_scipy(name):
+    meth, args, kw = FROM[name]
+    r, s = getattr(Rotation, meth)(*args, **kw), getattr(SR, meth)(*args, **kw)
+    assert r.shape == s.shape and r.single == s.single
+    same_rotation(r.as_quat(), s.as_quat(), 1e-13)
+
+
+def test_random_and_identity_match_scipy():
+    np.testing.assert_allclose(Rotation.random(3, rng=7).as_quat(), SR.random(3, rng=7).as_quat())
+    assert Rotation.random(jax.random.key(0), 5).shape == (5,)  # jax.scipy's signature
+    assert Rotation.random(shape=(2, 3), rng=1).shape == (2, 3)
+    r = Rotation.identity(4, jnp.float32)
+    assert r.as_quat().dtype == jnp.float32 and r.shape == (4,)
+    np.testing.assert_array_equal(Rotation.identity().as_matrix(), np.eye(3))
+
+
+def test_align_vectors_matches_scipy():
+    rng = np.random.default_rng(5)
+    a, b = rng.normal(size=(5, 3)), rng.normal(size=(5, 3))
+    w = rng.uniform(0.5, 2, 5)
+    r, rssd, sens = Rotation.align_vectors(a, b, w, return_sensitivity=True)
+    s, srssd, ssens = SR.align_vectors(a, b, w, return_sensitivity=True)
+    same_rotation(r.as_quat(), s.as_quat(), 1e-13)
+    np.testing.assert_allclose(rssd, srssd, rtol=1e-12)
+    np.testing.assert_allclose(sens, ssens, atol=1e-13)
+    w[2] = np.inf  # primary vector
+    same_rotation(
+        Rotation.align_vectors(a, b, w)[0].as_quat(), SR.align_vectors(a, b, w)[0].as_quat(), 1e-12
+    )
+    # a single pair: the smallest rotation, also for antiparallel vectors
+    for bb in (b[0], -a[0]):
+        r1 = Rotation.align_vectors(a[0], bb)[0]
+        np.testing.assert_allclose(r1.apply(bb / np.linalg.norm(bb)), a[0] / np.linalg.norm(a[0]))
+
+
+def test_reduce_and_groups_match_scipy():
+    left, right = SR.create_group("O"), SR.create_group("D3")
+    r = SR.from_quat(Q).reduce(left, right, return_indices=True)
+    mine = Rotation.from_quat(Q).reduce(
+        Rotation.create_group("O"), Rotation.create_group("D3"), return_indices=True
+    )
+    # scipy's group elements are in another order: compare the reduced rotations' angles,
+    # which are the minimum over the groups and so independent of the order.
+    np.testing.assert_allclose(mine[0].magnitude(), r[0].magnitude(), atol=1e-13)
+    for g, n in (("C5", 5), ("D4", 8), ("T", 12), ("O", 24), ("I", 60)):
+        m = Rotation.create_group(g).as_matrix()
+        assert m.shape == (n, 3, 3)
+        # closed under composition: every product is an element
+        prod = np.einsum("aij,bjk->abik", m, m).reshape(-1, 1, 9)
+        assert np.abs(prod - np.asarray(m).reshape(1, -1, 9)).max(-1).min(-1).max() < 1e-12
+
+
+def test_slerp_matches_scipy():
+    t = np.array([0.0, 1.0, 2.5, 3.0, 5.0, 6.0])
+    ti = np.linspace(0, 6, 13)
+    mine = Slerp(t, Rotation.from_quat(Q))(ti)
+    same_rotation(mine.as_quat(), SSlerp(t, SR.from_quat(Q))(ti).as_quat(), 1e-13)
+    assert Slerp.init(t, Rotation.from_quat(Q))(2.0).single
+    # under jit, construction and call together
+    f = jax.jit(lambda t, r, x: Slerp(t, r)(x).as_matrix())
+    np.testing.assert_allclose(f(t, Rotation.from_quat(Q), ti), mine.as_matrix(), atol=1e-14)
+
+
+# --- pytree behaviour ------------------------------------------------------------------
+
+
+def test_jit_vmap_scan_grad_pickle():
+    r = Rotation.from_quat(Q.reshape(2, 3, 4))
+    out = jax.jit(lambda r: r.inv() * r)(r)
+    assert isinstance(out, Rotation) and out.shape == (2, 3)
+    np.testing.assert_allclose(out.magnitude(), 0, atol=1e-7)
+    m = jax.vmap(lambda r: r.as_matrix())(r)
+    np.testing.assert_allclose(m, r.as_matrix())
+
+    step = Rotation.from_rotvec(jnp.asarray([0.0, 0.0, 0.1]))
+    final, _ = jax.lax.scan(lambda c, _: (c * step, None), Rotation.identity(), None, length=10)
+    np.testing.assert_allclose(final.as_rotvec(), [0, 0, 1.0], atol=1e-14)
+
+    # gradient through the class equals the gradient through the functions, at the identity
+    def loss_cls(v):
+        return jnp.sum(Rotation.from_rotvec(v).apply(jnp.asarray([1.0, 2.0, 3.0])) ** 2 * v[0])
+
+    def loss_fun(v):
+        q = rotjax.rotvec_to_quaternion(v)
+        return jnp.sum(rotjax.quaternion_apply(q, jnp.asarray([1.0, 2.0, 3.0])) ** 2 * v[0])
+
+    for v in (jnp.zeros(3), jnp.asarray([0.3, -0.2, 0.1])):
+        g = jax.grad(loss_cls)(v)
+        assert np.all(np.isfinite(g))
+        np.testing.assert_allclose(g, jax.grad(loss_fun)(v), atol=1e-15)
+    # the magnitude's gradient at pi and the Euler gradient at gimbal lock are finite
+    g = jax.grad(lambda q: Rotation.from_quat(q).as_euler("XYZ")[0])(
+        jnp.asarray([0.5, 0.5, 0.5, 0.5])
+    )
+    assert np.all(np.isfinite(g))
+
+    back = pickle.loads(pickle.dumps(r))
+    np.testing.assert_array_equal(back.as_quat(), r.as_quat())
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_dtype_preserved(dtype):
+    r = Rotation.from_quat(Q.astype(dtype))  # NumPy input keeps its float dtype too
+    outs = [r.as_matrix(), r.as_euler("zyx"), r.apply(V), r.as_mrp(), (r * r).as_quat()]
+    assert all(o.dtype == dtype for o in outs)
+
+
+def test_shapes_indexing_setitem():
+    r = Rotation.from_quat(Q.reshape(2, 3, 4))
+    assert r.shape == (2, 3) and len(r) == 2 and r[1].shape == (3,) and r[1, 2].single
+    assert r[..., 0].shape == (2,) and r[:, None].shape == (2, 1, 3)
+    assert [x.shape for x in r] == [(3,), (3,)]
+    # apply broadcasts the batch shapes explicitly, also under rank-promotion "raise"
+    assert r.apply(V[:3]).shape == (2, 3, 3) and r[0, 0].apply(V).shape == (6, 3)
+    assert (r * r[0, 0]).shape == (2, 3)
+    single = r[0, 0]
+    for op in (len, lambda s: s[0], iter):
+        with pytest.raises(TypeError):
+            op(single)
+    r2 = Rotation.from_quat(Q)
+    old = r2.as_quat()
+    r2[1:3] = Rotation.identity(2)
+    np.testing.assert_array_equal(r2.as_quat()[1:3], [[0, 0, 0, 1]] * 2)
+    np.testing.assert_array_equal(r2.as_quat()[0], old[0])
+    c = Rotation.concatenate([r2[0], r2[1:4]])
+    assert c.shape == (4,)
+    assert repr(Rotation.identity()).startswith("Rotation.from_matrix(")
+
+
+ERRORS = {
+    "quat_shape": (ValueError, lambda: Rotation.from_quat(np.ones(3))),
+    "zero_quat": (ValueError, lambda: Rotation.from_quat(np.zeros(4))),
+    "matrix_shape": (ValueError, lambda: Rotation.from_matrix(np.eye(2))),
+    "det_negative": (ValueError, lambda: Rotation.from_matrix(-np.eye(3))),
+    "euler_seq": (ValueError, lambda: Rotation.from_euler("xyzx", [1, 2, 3, 4])),
+    "euler_mixed": (ValueError, lambda: Rotation.from_euler("xY", [1, 2])),
+    "euler_repeat": (ValueError, lambda: Rotation.from_euler("xx", [1, 2])),
+    "euler_angles": (ValueError, lambda: Rotation.from_euler("xyz", [1, 2])),
+    "as_euler_seq": (ValueError, lambda: Rotation.identity().as_euler("xy")),
+    "weights_negative": (ValueError, lambda: Rotation.align_vectors(V, V, -np.ones(6))),
+    "two_infinite": (ValueError, lambda: Rotation.align_vectors(V, V, [np.inf] * 2 + [1] * 4)),
+    "sensitivity_one_pair": (
+        ValueError,
+        lambda: Rotation.align_vectors(V[0], V[0], return_sensitivity=True),
+    ),
+    "mul_shapes": (ValueError, lambda: Rotation.from_quat(Q) * Rotation.from_quat(Q[:2])),
+    "pow_array": (ValueError, lambda: Rotation.identity() ** np.ones(2)),
+    "mean_axis": (ValueError, lambda: Rotation.from_quat(Q).mean(axis=1)),
+    "davenport_order": (ValueError, lambda: Rotation.from_davenport(np.eye(3), "x", [1, 2, 3])),
+    "davenport_axes": (
+        ValueError,
+        lambda: Rotation.from_davenport([[1, 0, 0], [1, 1, 0]], "e", [1, 2]),
+    ),
+    "group": (ValueError, lambda: Rotation.create_group("Q")),
+    "slerp_range": (ValueError, lambda: Slerp([0, 1], Rotation.from_quat(Q[:2]))(2.0)),
+    "slerp_order": (ValueError, lambda: Slerp([1, 0], Rotation.from_quat(Q[:2]))),
+    "setitem_type": (TypeError, lambda: Rotation.from_quat(Q).__setitem__(0, 1)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(ERRORS))
+def test_errors(name):
+    exc, f = ERRORS[name]
+    with pytest.raises(exc):
+        f()
+
+
+def test_values_under_jit_give_nan():
+    nan_q = jax.jit(lambda q: Rotation.from_quat(q).as_quat())(jnp.zeros((2, 4)).at[0, 3].set(1))
+    assert np.all(np.isfinite(nan_q[0])) and np.all(np.isnan(nan_q[1]))
+    m = jnp.stack([jnp.eye(3), -jnp.eye(3)])
+    q = jax.jit(lambda m: Rotation.from_matrix(m).as_quat())(m)
+    assert np.all(np.isfinite(q[0])) and np.all(np.isnan(q[1]))
+
+
+def test_jax_scipy_snippet_runs_unchanged():
+    # Code written for jax.scipy.spatial.transform, with only the import swapped.
+    from jax.scipy.spatial import transform as jst
+
+    def script(R, S):
+        r = R.from_euler("xyz", jnp.asarray([[0.1, 0.2, 0.3], [0.4, -0.2, 1.0]]))
+        s = S.init(jnp.asarray([0.0, 1.0]), r)
+        out = jax.jit(lambda x: s(x).apply(jnp.asarray([1.0, 0.0, 0.0])))(jnp.asarray(0.25))
+        return (
+            out,
+            R.identity(dtype=jnp.float32).as_quat(),  # jax.scipy: num must be None
+            R.concatenate([r, r]).as_rotvec(),
+            jax.vmap(lambda q: R.from_quat(q).apply(jnp.asarray([0.0, 1.0, 0.0])))(r.as_quat()),
+            r.magnitude(),
+            (r[0] * r[1].inv()).as_matrix(),
+        )
+
+    for a, b in zip(script(Rotation, Slerp), script(jst.Rotation, jst.Slerp), strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+# --- the new functions and RotationSpline -------------------------------------------------
+
+
+def test_as_davenport_oblique_axes_match_scipy():
+    axes = np.array([[1.0, 0, 0], [0, 1, 0], [np.cos(2.0), 0, np.sin(2.0)]])
+    rot = SR.from_quat(Q)
+    for order in ("e", "i"):
+        np.testing.assert_allclose(
+            Rotation.from_quat(Q).as_davenport(axes, order),
+            rot.as_davenport(axes, order),
+            atol=1e-13,
+        )
+
+
+def test_rotation_spline_matches_scipy():
+    from scipy.spatial.transform import RotationSpline as SSpline
+
+    t = np.array([0.0, 1.0, 2.5, 3.0, 5.0, 6.0])
+    ti = np.linspace(-0.5, 6.5, 15)
+    mine, ref = rotjax.RotationSpline(t, Rotation.from_quat(Q)), SSpline(t, SR.from_quat(Q))
+    same_rotation(mine(ti).as_quat(), ref(ti).as_quat(), 1e-12)
+    np.testing.assert_allclose(mine(ti, 1), ref(ti, 1), atol=1e-12)
+    np.testing.assert_allclose(mine(ti, 2), ref(ti, 2), atol=1e-11)
+
+
+SINGULAR_QUATS = {
+    "identity": [0.0, 0.0, 0.0, 1.0],
+    "half_turn": [0.0, 0.6, 0.8, 0.0],
+    "generic": [0.1, -0.3, 0.2, 0.9],
+}
+
+
+@pytest.mark.parametrize("name", sorted(SINGULAR_QUATS))
+def test_new_functions_gradients_finite_and_true(name):
+    q = jnp.asarray(SINGULAR_QUATS[name])
+    dq = jnp.asarray([0.3, -0.2, 0.5, 0.1])
+    h = 1e-6
+
+    def check(f, x, dx, side=None):
+        _, jvp = jax.jvp(f, (x,), (dx,))
+        assert np.all(np.isfinite(jvp))
+        # one-sided at the 180-degree cut (the side that keeps w >= 0), central elsewhere
+        fd = (f(x + h * dx) - f(x)) / h if side else (f(x + h * dx) - f(x - h * dx)) / (2 * h)
+        np.testing.assert_allclose(jvp, fd, atol=1e-6)
+
+    side = name == "half_turn"
+    check(rotjax.quaternion_to_mrp, q, dq, side)
+    check(lambda n: rotjax.quaternion_power(q, n), jnp.asarray(1.0), jnp.asarray(1.0), side)
+    check(lambda x: rotjax.quaternion_power(x, jnp.asarray(0.4)), q, dq, side)
+    check(rotjax.mrp_to_quaternion, q[:3], dq[:3])
+
+
+def test_new_functions_round_trips():
+    q = jnp.asarray(Q)
+    same_rotation(
+        rotjax.mrp_to_quaternion(rotjax.quaternion_to_mrp(q)),
+        q / np.linalg.norm(Q, axis=-1, keepdims=True),
+        1e-15,
+    )
+    c = rotjax.quaternion_canonical(
+        jnp.asarray([[0.0, -1.0, 0, 0], [0, 0, 0, -1.0], [1, 0, 0, -2]])
+    )
+    np.testing.assert_array_equal(c, [[0, 1, 0, 0], [0, 0, 0, 1], [-1, 0, 0, 2]])
+    axes = np.array([[0.0, 0, 2], [1, 0, 0], [0, 0, 1]])
+    ang = rotjax.quaternion_to_davenport(q, axes, extrinsic=True)
+    same_rotation(
+        rotjax.davenport_to_quaternion(axes, ang, extrinsic=True),
+        q / np.linalg.norm(Q, axis=-1, keepdims=True),
+        1e-14,
+    )
+
+
+def test_jit_class_compiles_to_the_functions_program():
+    # Under jit the class adds no work: the same operations, flops and bytes as the functions.
+    import re
+
+    def ops(f, *args):
+        c = f.lower(*args).compile()
+        ca = c.cost_analysis()
+        ca = ca[0] if isinstance(ca, list) else ca
+        text = re.sub(r", metadata=\{[^}]*\}", "", c.as_text())
+        found = sorted(re.findall(r"= \S+\[[^\]]*\][^ ]* (\w+)\(", text))
+        return found, ca.get("flops"), ca.get("bytes accessed")
+
+    q, v = jnp.asarray(Q), jnp.asarray(V)
+    cls = jax.jit(lambda q, v: (Rotation.from_quat(q) * Rotation.from_quat(q[::-1])).apply(v))
+    fun = jax.jit(
+        lambda q, v: rotjax.quaternion_apply(
+            rotjax.quaternion_normalize(
+                rotjax.quaternion_multiply(
+                    rotjax.quaternion_normalize(q), rotjax.quaternion_normalize(q[::-1])
+                )
+            ),
+            v,
+        )
+    )
+    assert ops(cls, q, v) == ops(fun, q, v)
