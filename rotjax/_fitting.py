@@ -1,16 +1,9 @@
 """Rotations inside optimisation and learning loops: losses, continuous representations,
 Wahba's problem, averaging and interpolation.
 
-Two private helpers carry the differentiation work and are shared by several functions:
-
-* ``_project`` is the special-orthogonal projection of a 3x3 matrix by SVD, with a closed-form
-  JVP that never touches the derivatives of ``U`` and ``V`` separately (those have
-  ``1 / (s_i^2 - s_j^2)`` terms and are NaN whenever singular values tie, e.g. at the identity);
-* ``top_eigenvector`` is the eigenvector of the largest eigenvalue of a symmetric 4x4 matrix, with
-  a JVP whose ``1 / (lambda_max - lambda_j)`` terms are safe-divided.
-
-Both set to zero the component of the derivative that has no finite value: the direction in
-which the solution is not unique. Everywhere else they are the exact derivative.
+The 9D projection, Wahba's problem and the mean are each the top eigenvector of a symmetric 4x4
+matrix, computed by :func:`rotjax._eigen.top_eigenvector` (Jacobi sweeps, elementwise over the
+batch; exact first and second derivatives where the top eigenvalue is simple, finite at ties).
 """
 
 from __future__ import annotations
@@ -18,26 +11,23 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._matrix import _from_matrix, _k4_columns, _positive_w
+from ._eigen import nearest_quaternion, pow2_scale, top_eigenvector
+from ._matrix import _positive_w
 from ._numerics import (
     FULL,
-    TIE_ULPS,
     as_float,
     check_shape,
     cross,
-    eps,
     from_scalar_last,
     like_rank,
     matmul,
     public,
     safe_atan2,
-    safe_div,
     safe_norm,
     to_scalar_last,
-    top_eigenvector,
     vee,
 )
-from ._quaternion import _conjugate, _multiply, _normalize
+from ._quaternion import _conjugate, _multiply, _normalize, _to_matrix
 from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
 
 ALIGN_METHODS = ("svd", "q-method")
@@ -45,9 +35,6 @@ ALIGN_METHODS = ("svd", "q-method")
 
 def _mT(x):
     return jnp.swapaxes(x, -1, -2)
-
-
-# --- special-orthogonal projection (SVD) --------------------------------------------------
 
 
 def _svd_signed(M):
@@ -59,46 +46,6 @@ def _svd_signed(M):
     d = jnp.sign(jnp.linalg.det(matmul(U, Vt)))  # exactly +-1 up to rounding: U, V are orthogonal
     flip = jnp.stack([jnp.ones_like(d), jnp.ones_like(d), d], axis=-1)
     return U * flip[..., None, :], s * flip, Vt
-
-
-@jax.custom_jvp
-def _project(M):
-    """Rotation nearest to ``M`` in the Frobenius norm: ``U diag(1, 1, det(U V^T)) V^T``."""
-    U, _, Vt = _svd_signed(M)
-    return matmul(U, Vt)
-
-
-@_project.defjvp
-def _project_jvp(primals, tangents):
-    # Polar decomposition M = R H with H = V diag(s') V^T symmetric (s' = signed values).
-    # Differentiating, R^T dM = Omega H + dH with Omega = R^T dR antisymmetric. In the V basis,
-    # P = U^T dM V = W S' + Y (W = V^T Omega V antisymmetric, Y symmetric), so that
-    # P - P^T = W S' + S' W, i.e. W_ij = (P_ij - P_ji) / (s'_i + s'_j), and dR = U W V^T.
-    # The denominators vanish only where the projection is not unique: rank(M) <= 1, or
-    # det M < 0 with s_2 = s_3 (then s'_2 + s'_3 = s_2 - s_3). There W_ij is set to 0.
-    (M,), (dM,) = primals, tangents
-    U, s, Vt = _svd_signed(M)
-    P = matmul(matmul(_mT(U), dM), _mT(Vt))
-    den = s[..., :, None] + s[..., None, :]
-    tol = TIE_ULPS * eps(M.dtype) * jnp.abs(s[..., :1, None])
-    W = safe_div(P - _mT(P), den, tol)
-    return matmul(U, Vt), matmul(matmul(U, W), Vt)
-
-
-# --- top eigenvector of a symmetric 4x4 matrix ------------------------------------------
-
-
-def _davenport(B):
-    """Davenport's symmetric 4x4 ``K`` (plus the identity) for the attitude profile ``B``.
-
-    The matrix-to-quaternion ``K`` of :mod:`rotjax._matrix` is linear in its argument plus the
-    identity, and satisfies ``q^T K(R(p)) q = 4 (q.p)^2 = tr(R(q)^T R(p)) + 1`` for unit ``q``,
-    ``p``. Since rotation matrices span all 3x3 matrices, ``q^T K(B) q = tr(R(q)^T B) + 1`` for
-    every ``B``: its top eigenvector maximises Wahba's gain (Davenport's q-method). The added
-    identity does not change the eigenvectors.
-    """
-    cols, _ = _k4_columns(B)
-    return jnp.stack([jnp.stack(c, axis=-1) for c in cols], axis=-1)
 
 
 # --- losses --------------------------------------------------------------------------------
@@ -234,29 +181,32 @@ def matrix_to_sixd(R):
 
 @public
 def nined_to_matrix(x):
-    """Nearest rotation matrix to an arbitrary 3x3, by SVD (Levinson et al. 2020).
+    """Nearest rotation matrix to an arbitrary 3x3 (Levinson et al. 2020), without an SVD.
 
     Args:
         x: ``(..., 9)`` entries of a 3x3 matrix ``M`` in row-major order (a network output);
-            pass ``M.reshape(*M.shape[:-2], 9)`` to project a matrix.
+            pass ``M.reshape(*M.shape[:-2], 9)`` to project a matrix. Any finite scale
+            (float32 1e-30..1e30, float64 1e-300..1e300; the result does not depend on it).
 
     Returns:
-        ``(..., 3, 3)`` the rotation ``R = U diag(1, 1, det(U V^T)) V^T`` minimising
-        ``||R - M||_F``, where ``M = U diag(s) V^T``. For ``M`` already a rotation, ``R = M``.
+        ``(..., 3, 3)`` the special-orthogonal polar factor of ``M``: the rotation ``R``
+        minimising ``||R - M||_F``, i.e. ``U diag(1, 1, det(U V^T)) V^T`` for the SVD
+        ``M = U diag(s) V^T`` (``det M < 0`` included). For ``M`` already a rotation, ``R = M``.
+        Computed as the rotation of the top eigenvector of Bar-Itzhack's symmetric 4x4 ``K(M)``
+        (Bar-Itzhack 2000), whose eigenvalue gap is ``2 (s'_2 + s'_3)`` (``s'`` the singular
+        values with ``det(U V^T)`` moved into ``s'_3``).
 
     Note:
-        Differentiated in closed form, not through ``U`` and ``V``: with ``s'`` the singular
-        values after moving ``det(U V^T)`` into ``s'_3``,
-        ``dR = U W V^T`` with ``W_ij = (P_ij - P_ji) / (s'_i + s'_j)``, ``P = U^T dM V``. So
-        ties ``s_i = s_j`` (the identity, any rotation, isotropic noise) are harmless: the
-        gradient there is exact. The denominators vanish only where the projection itself is
-        not unique, ``rank(M) <= 1`` or ``det M < 0`` with ``s_2 = s_3``; they are safe-divided
-        (the term is set to 0 when ``|s'_i + s'_j| <= 64 eps s_1``), so the gradient is finite
-        and has no component along the undetermined rotation.
+        Gradients and Hessians are exact wherever the projection is unique (``s'_2 + s'_3 > 0``),
+        including every exact rotation and isotropic noise, where singular values tie. The
+        projection is not unique for ``rank(M) <= 1`` or for ``det M < 0`` with ``s_2 = s_3``:
+        the gradient there is finite, with zero component along the undetermined rotation.
+        The zero matrix and non-finite entries give NaN.
     """
     (x,), dt = as_float(x)
     check_shape(x, (9,), "x")
-    return _project(x.reshape(*x.shape[:-1], 3, 3)).astype(dt)
+    q = nearest_quaternion(x.reshape(*x.shape[:-1], 3, 3))
+    return _to_matrix(q).astype(dt)
 
 
 # --- Wahba's problem --------------------------------------------------------------------
@@ -275,28 +225,30 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
         a: ``(..., N, 3)`` vectors in the reference frame.
         b: ``(..., N, 3)`` the same vectors in the body frame; broadcasts against ``a``.
         weights: ``(..., N)`` non-negative weights; ``None`` for all ones.
-        method: ``"svd"`` (Kabsch/Markley 1988: ``R = U diag(1, 1, det(U V^T)) V^T`` from the
-            SVD of ``B``, then the quaternion) or ``"q-method"`` (Davenport: the top eigenvector
-            of the symmetric 4x4 ``K(B)``). Both give the same rotation up to rounding.
+        method: ``"svd"`` or ``"q-method"``, kept for compatibility: both are computed the
+            same way, as the top eigenvector of Davenport's symmetric 4x4 ``K(B)`` (Davenport's
+            q-method), which maximises ``tr(R^T B)`` exactly as the SVD solution
+            ``U diag(1, 1, det(U V^T)) V^T`` of ``B`` does (Markley 1988), without an SVD.
         scalar_first: return ``(w, x, y, z)``.
 
     Returns:
-        ``(..., 4)`` unit quaternion of ``R``, with ``w >= 0``.
+        ``(..., 4)`` unit quaternion of ``R``, with ``w >= 0``. NaN where all weights (or all
+        vectors) are zero, or an entry is not finite. The result does not depend on the scale of
+        ``a``, ``b`` or the weights (e.g. magnetometer data in tesla or microtesla).
 
     Raises:
         ValueError: for shapes other than ``(..., N, 3)`` or an unknown ``method``.
 
     Note:
-        Where the solution is unique and the problem well posed (two or more non-parallel
-        vectors), both methods are differentiable and their gradients are exact, including
-        noise-free data, where singular values of ``B`` may tie (see :func:`nined_to_matrix`)
-        but the eigenvalue gap of ``K`` is ``2 (s_2 + s_3) > 0``.
+        Where the solution is unique (two or more non-parallel vectors with positive weight)
+        gradients and Hessians are exact, including noise-free data, where singular values of
+        ``B`` tie: the eigenvalue gap of ``K`` is ``2 (s_2 + s_3) > 0``.
 
         With a single vector pair (or all vectors parallel) any rotation about ``a`` composed
-        with the optimum is optimal too; the one returned is whichever the decomposition picks.
-        The gradient is then finite: its component along the undetermined rotation about ``a``
-        is zero, and the rest, which moves ``R b`` to follow ``a``, is exact. Functions of
-        ``R b`` therefore have exact gradients there.
+        with the optimum is optimal too, and one of them is returned. The gradient is then
+        finite: its component along the undetermined rotation about ``a`` is zero, and the rest,
+        which moves ``R b`` to follow ``a``, is exact. Functions of ``R b`` therefore have exact
+        gradients there.
     """
     if method not in ALIGN_METHODS:
         raise ValueError(f"method must be one of {ALIGN_METHODS}, got {method!r}")
@@ -315,12 +267,13 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
     if weights is not None:
         if weights.ndim < 1 or weights.shape[-1] != a.shape[-2]:
             raise ValueError(f"weights: expected shape (..., {a.shape[-2]}), got {weights.shape}")
-        a = a * weights[..., None]
+        a = a * pow2_scale(weights, (-1,))[..., None]
+    # Each set of vectors scaled by a power of two first (exact), so that B neither underflows
+    # nor overflows; the rotation does not depend on these scales.
+    a = pow2_scale(a, (-2, -1))
+    b = pow2_scale(b, (-2, -1))
     B = jnp.einsum("...ni,...nj->...ij", a, b, precision=FULL)
-    if method == "svd":
-        q = _from_matrix(_project(B), "shepperd")
-    else:
-        q = top_eigenvector(_davenport(B))
+    q = nearest_quaternion(B)
     return from_scalar_last(_positive_w(q), scalar_first).astype(dt)
 
 
@@ -344,11 +297,16 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
     Returns:
         ``(..., 4)`` unit quaternion with ``w >= 0``.
 
+    Raises:
+        ValueError: for an empty set (``N = 0``) or mismatched shapes.
+
     Note:
         For rotations about one axis by angles ``t_i`` the mean is the rotation by the circular
-        mean ``atan2(sum w_i sin t_i, sum w_i cos t_i)``. The mean is undefined when the top
-        eigenvalue is repeated (e.g. two rotations 180 degrees apart with equal weights); the
-        gradient is then finite, with zero component within the tied eigenspace.
+        mean ``atan2(sum w_i sin t_i, sum w_i cos t_i)``. All-zero weights give NaN. Gradients
+        and Hessians are exact where the top eigenvalue is simple, identical inputs included.
+        The mean is undefined when the top eigenvalue is repeated (e.g. two rotations 180
+        degrees apart with equal weights); the gradient is then finite, with zero component
+        within the tied eigenspace.
     """
     if weights is None:
         (q,), dt = as_float(q)
@@ -357,12 +315,17 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
     check_shape(q, (4,), "q")
     if q.ndim < 2:
         raise ValueError(f"q: expected shape (..., N, 4), got {tuple(q.shape)}")
+    if q.shape[-2] == 0:
+        raise ValueError("q: the mean of an empty set (N = 0) is undefined")
     q = _normalize(to_scalar_last(q, scalar_first))
     if weights is not None and (weights.ndim < 1 or weights.shape[-1] != q.shape[-2]):
         raise ValueError(f"weights: expected shape (..., {q.shape[-2]}), got {weights.shape}")
-    qw = q if weights is None else q * weights[..., None]
+    qw = q if weights is None else q * pow2_scale(weights, (-1,))[..., None]
     M = jnp.einsum("...ni,...nj->...ij", qw, q, precision=FULL)
-    return from_scalar_last(_positive_w(top_eigenvector(M)), scalar_first).astype(dt)
+    v = top_eigenvector(M)
+    if weights is not None:
+        v = jnp.where(jnp.all(weights == 0, axis=-1, keepdims=True), jnp.nan, v)
+    return from_scalar_last(_positive_w(v), scalar_first).astype(dt)
 
 
 @public

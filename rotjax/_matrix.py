@@ -6,15 +6,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._eigen import nearest_quaternion
 from ._numerics import (
     as_float,
     check_shape,
     from_scalar_last,
-    matvec,
     max_abs,
     public,
     rsqrt,
-    top_eigenvector,
     unit_scale,
 )
 
@@ -236,33 +235,14 @@ def _markley(R):
     return _stack_last(v, _hemisphere_scale(v, sum(x * x for x in v)))
 
 
-def _unit(v):
-    return v / jnp.sqrt(jnp.sum(v * v, axis=-1, keepdims=True))
-
-
 def _from_matrix(R, method: str):
     if method == "shepperd":
         return _shepperd(R)
     if method == "markley":
         return _markley(R)
     if method == "optimal":
-        R, _, _ = _prescaled(R)
-        cols, _ = _k4_columns(R)
-        K = jnp.stack([jnp.stack(c, axis=-1) for c in cols], axis=-1)
-        # Bar-Itzhack 2000: the top eigenvector of the symmetric K is the quaternion of the
-        # rotation nearest to R in the Frobenius norm. Then one power step, which scales the
-        # eigensolver's error along each other eigenvector by lambda_j / lambda_top. K's
-        # eigenvalues sum to 4; for R near a rotation the top one is 4 + O(noise) and the others
-        # O(noise), so the step removes that error (the benchmark's largest error, float32 /
-        # float64: 2.8 / 3.0 -> 1.15 / 1.0 eps; cuSOLVER's eigh had left 4.9 float32 eps near
-        # the identity). Far from a rotation it changes little (an ad-hoc check on random
-        # Gaussian matrices: 9.9 -> 8.6 eps). At an exact eigenvector its derivative is the
-        # eigenvector's, and |K v| = lambda_top >= 1: no small divisor.
-        v = top_eigenvector(K)
-        v = matvec(K, v)
-    else:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    return _positive_w(_unit(v))
+        return _positive_w(nearest_quaternion(R))  # Bar-Itzhack 2000; see rotjax._eigen
+    raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
 
 @public

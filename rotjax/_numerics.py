@@ -368,31 +368,3 @@ def safe_div(num, den, tol):
     """``num / den`` where ``|den| > tol``, else 0 (double where: the gradient stays finite)."""
     small = jnp.abs(den) <= tol
     return jnp.where(small, 0.0, num / jnp.where(small, 1.0, den))
-
-
-@jax.custom_jvp
-def top_eigenvector(K):
-    """Unit eigenvector of the largest eigenvalue of a symmetric ``(..., n, n)`` ``K``.
-
-    The sign is arbitrary. The derivative (below) is exact while the top eigenvalue is simple;
-    at a tie, the component along the tied eigenspace (where the answer is not unique) is 0.
-    """
-    return jnp.linalg.eigh(K)[1][..., :, -1]
-
-
-@top_eigenvector.defjvp
-def _top_eigenvector_jvp(primals, tangents):
-    # First-order perturbation: dv = sum_{j != top} v_j (v_j^T dK v) / (lambda_top - lambda_j).
-    # Only the gaps to the top eigenvalue appear. eigh's own derivative divides by the gaps
-    # between *all* eigenvalues, which are 0 for the three lower eigenvalues of Bar-Itzhack's K
-    # at an exact rotation: NaN at the identity. A zero gap to the top one (e.g. one vector pair
-    # in Wahba's problem) means the top eigenvector is not unique; that component is set to 0.
-    (K,), (dK,) = primals, tangents
-    lam, V = jnp.linalg.eigh(K)
-    v = V[..., :, -1]
-    dK = 0.5 * (dK + jnp.swapaxes(dK, -1, -2))
-    proj = jnp.sum(V * matvec(dK, v)[..., :, None], axis=-2)
-    gap = lam[..., -1:] - lam
-    tol = TIE_ULPS * eps(K.dtype) * jnp.max(jnp.abs(lam), axis=-1, keepdims=True)
-    coef = safe_div(proj, gap, tol)  # the top eigenvector itself has gap 0 -> coefficient 0
-    return v, matvec(V, coef)
