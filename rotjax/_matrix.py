@@ -11,6 +11,7 @@ from ._numerics import (
     as_float,
     check_shape,
     from_scalar_last,
+    like_rank,
     max_abs,
     public,
     rsqrt,
@@ -184,10 +185,9 @@ def _shepperd_jvp(primals, tangents):
     q = [x * z for x in c]
     zs = (z * s)[..., None, None]
     dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * R1
-    pat = _DK_PATTERN.astype(R.dtype)
     u = []
     for a in range(4):
-        m = sum(sel[b] * pat[a, b] for b in range(4)) + sel[a] * dt
+        m = sum(sel[b] * like_rank(_DK_PATTERN[a, b], R) for b in range(4)) + sel[a] * dt
         u.append(jnp.sum((zs * m) * dR, axis=(-2, -1)))
     qu = sum(q[a] * u[a] for a in range(4))
     return _shepperd(R), jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
