@@ -12,6 +12,7 @@ import numpy as np
 from ._fitting import _svd_signed
 from ._numerics import (
     FULL,
+    _check_static,
     as_float,
     check_shape,
     from_scalar_last,
@@ -176,6 +177,9 @@ def rotation_group(group: str, axis: str = "Z", dtype=None, scalar_first: bool =
     Raises:
         ValueError: for an unknown group or axis.
     """
+    if dtype is not None and not jnp.issubdtype(dtype, jnp.floating):
+        raise TypeError(f"dtype must be real (a floating dtype), got {jnp.dtype(dtype)}")
+    scalar_first = _check_static("scalar_first", scalar_first)
     q = jnp.asarray(_group(group, axis), dtype=dtype if dtype is not None else float)
     return from_scalar_last(q, scalar_first)
 

@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import functools
-
-import jax
 import jax.numpy as jnp
 
 from ._euler import _quat_to_euler
 from ._matrix import _from_matrix
-from ._numerics import as_float, check_shape, cross, from_scalar_last, to_scalar_last
+from ._numerics import as_float, check_shape, cross, from_scalar_last, public, to_scalar_last
 from ._quaternion import _conjugate, _multiply
 from ._rotvec import _rotvec_to_quat
 
@@ -26,8 +23,7 @@ def parse_order(order) -> bool:
     return ORDERS[order]
 
 
-# ``extrinsic`` selects code, so it is static too (``public`` knows only the shared names).
-@functools.partial(jax.jit, static_argnames=("extrinsic", "degrees", "scalar_first"))
+@public(static=("extrinsic",))
 def davenport_to_quaternion(
     axes, angles, extrinsic: bool = False, degrees: bool = False, scalar_first: bool = False
 ):
@@ -74,7 +70,7 @@ def davenport_to_quaternion(
     return from_scalar_last(q, scalar_first).astype(dt)
 
 
-@functools.partial(jax.jit, static_argnames=("extrinsic", "degrees", "scalar_first"))
+@public(static=("extrinsic",))
 def quaternion_to_davenport(
     q, axes, extrinsic: bool = False, degrees: bool = False, scalar_first: bool = False
 ):

@@ -693,7 +693,7 @@ def _step_rotvecs(w, h, frame, method):
     return h * (a + b) / 2 + (sign * float(np.sqrt(3.0)) / 12) * h * h * cross(a, b)
 
 
-@public
+@public(time_leading=("omega",))
 def integrate_angular_velocity_samples(
     q0, omega, dt, frame: str = "body", method: str = "magnus4", scalar_first: bool = False
 ):

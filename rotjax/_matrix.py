@@ -88,7 +88,7 @@ def _scaled_k(R):
     ``d`` terms. NaN throughout for a zero or non-finite ``R``."""
     R, f2, _ = _prescaled(R)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
-    return _k4_columns(R, h * rsqrt(h))
+    return _k4_columns(R, jnp.sqrt(h))  # correctly rounded: the same bits in every program
 
 
 def _masks(diag):

@@ -278,7 +278,7 @@ def _broadcast_batches(arrays: dict) -> None:
 def _check_static(name: str, value):
     """Validate one configuration argument's type (its value is checked by the function that
     reads it, which knows the valid choices) and return it in canonical form."""
-    if name in ("degrees", "scalar_first"):
+    if name in ("degrees", "scalar_first", "extrinsic", "normalize"):
         if not isinstance(value, (bool, np.bool_)):
             raise TypeError(f"{name} must be a bool, got {type(value).__name__} {value!r}")
         return bool(value)
@@ -298,8 +298,13 @@ def _check_array(name: str, value) -> None:
         raise TypeError(f"{name} must be real (float or integer), got complex {value.dtype}")
 
 
-def public(fun):
+def public(fun=None, *, static=(), time_leading=()):
     """Jit-wrap a public function, with the configuration arguments it takes made static.
+
+    ``static``: further argument names to make static (flags of that function alone, such as
+    ``extrinsic``). ``time_leading``: array arguments whose first axis is time, before the
+    batch axes (a gyro log); the function broadcasts them itself, so they take no part in the
+    batch-shape check below.
 
     Parsing and validation of those arguments then happens once, in Python, at trace time:
     errors are raised eagerly and cost nothing on later calls. Before the function body runs,
@@ -315,6 +320,8 @@ def public(fun):
     A static argument that cannot be hashed (``seq`` as a list) fails in ``jax.jit`` before
     any of this; the wrapper then runs the same checks to raise the clear error instead.
     """
+    if fun is None:
+        return functools.partial(public, static=static, time_leading=time_leading)
     sig = inspect.signature(fun)
     params = sig.parameters
     # ``seq`` is static wherever it appears; the other names only as keyword options with a
@@ -322,7 +329,8 @@ def public(fun):
     static = [
         n
         for n, p in params.items()
-        if n in STATIC_ARGS and (n == "seq" or p.default is not inspect.Parameter.empty)
+        if (n in STATIC_ARGS and (n == "seq" or p.default is not inspect.Parameter.empty))
+        or n in static
     ]
 
     def validated(*args, **kwargs):
@@ -339,7 +347,9 @@ def public(fun):
     @functools.wraps(fun)
     def traced(*args, **kwargs):
         bound = validated(*args, **kwargs)
-        given = {n: bound.arguments[n] for n in arrays if n in bound.arguments}
+        given = {
+            n: bound.arguments[n] for n in arrays if n in bound.arguments and n not in time_leading
+        }
         _broadcast_batches(given)
         bound.arguments.update(given)
         return fun(*bound.args, **bound.kwargs)

@@ -27,7 +27,7 @@ from ._fitting import quaternion_mean
 from ._kinematics import quaternion_derivative_to_angular_velocity
 from ._matrix import matrix_to_quaternion
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
-from ._numerics import cross, eps, matvec, safe_atan2, to_scalar_last
+from ._numerics import _check_array, _check_static, cross, eps, matvec, safe_atan2, to_scalar_last
 from ._quaternion import (
     angle_between,
     quaternion_apply,
@@ -42,6 +42,7 @@ from ._rotvec import quaternion_to_rotvec, rotvec_to_quaternion
 
 def _float(x, dtype=None):
     """``x`` as a JAX float array (integers to the default float; float32/64 kept)."""
+    _check_array("input", x)
     x = jnp.asarray(x, dtype=dtype)
     if not jnp.issubdtype(x.dtype, jnp.floating):
         x = x.astype(float)
@@ -56,6 +57,7 @@ def _concrete(x) -> np.ndarray | None:
     """
     if isinstance(x, jax.Array):  # tracers are jax.Array instances too
         return None
+    _check_array("input", x)
     try:
         a = np.asarray(x)
         return a if np.issubdtype(a.dtype, np.floating) else a.astype(float)
@@ -153,6 +155,8 @@ class Rotation:
 
     def __init__(self, quat, normalize: bool = True, copy: bool = True, scalar_first: bool = False):
         del copy  # JAX arrays are immutable: there is nothing to copy
+        normalize = _check_static("normalize", normalize)
+        scalar_first = _check_static("scalar_first", scalar_first)
         host = _concrete(quat)
         # Host input goes to the jitted function as it is: one dispatch, no separate transfer.
         q = host if host is not None else _float(quat)
