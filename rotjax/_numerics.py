@@ -347,8 +347,11 @@ def public(fun=None, *, static=(), time_leading=()):
     @functools.wraps(fun)
     def traced(*args, **kwargs):
         bound = validated(*args, **kwargs)
+        # A list or tuple argument arrives as a pytree of scalars: one array again.
         given = {
-            n: bound.arguments[n] for n in arrays if n in bound.arguments and n not in time_leading
+            n: jnp.asarray(v) if isinstance(v, (list, tuple)) else v
+            for n, v in bound.arguments.items()
+            if n in arrays and n not in time_leading
         }
         _broadcast_batches(given)
         bound.arguments.update(given)
