@@ -130,7 +130,9 @@ def _compute_report(seq):
         r["jvp_fd"] = np.asarray((f(x + _H * t) - f(x - _H * t)) / (2 * _H))
         cot = t[:, :3]
         r["vjp"] = np.asarray(jax.vjp(f, x)[1](cot)[0])
-        fd_rows = [np.asarray((f(x + _H * e) - f(x - _H * e)) * cot) for e in jnp.eye(7)]
+        fd_rows = [
+            np.asarray((f(x + _H * e[None]) - f(x - _H * e[None])) * cot) for e in jnp.eye(7)
+        ]
         r["vjp_fd"] = np.stack([row.sum(-1) / (2 * _H) for row in fd_rows], axis=-1)
         out[frame] = r
     return out
@@ -325,6 +327,10 @@ def test_damping_traced_inside_jit_switch():
 
 def _quat_path(q0, omega, frame, t):
     """q(t) for constant omega, built from core conversions: q0 * exp(omega t) or exp * q0."""
+    omega, t = jnp.asarray(omega), jnp.asarray(t)
+    rank = max(omega.ndim, t.ndim)  # explicit rank promotion
+    omega = omega.reshape((1,) * (rank - omega.ndim) + omega.shape)
+    t = t.reshape((1,) * (rank - t.ndim) + t.shape)
     dq = rj.rotvec_to_quaternion(omega * t)
     return rj.quaternion_multiply(q0, dq) if frame == "body" else rj.quaternion_multiply(dq, q0)
 
@@ -1021,7 +1027,6 @@ def test_unwrap_euler_nan_stays_local():
     "call",
     [
         lambda: rj.unwrap_quaternion(np.zeros((5, 4)), axis=1),
-        lambda: rj.unwrap_quaternion(np.zeros((5, 4)), axis=1.0),
         lambda: rj.unwrap_quaternion(np.zeros((5, 3))),
         lambda: rj.integrate_angular_velocity_samples(np.zeros(4), np.zeros((5, 3)), 0.1, "x"),
         lambda: rj.integrate_angular_velocity_samples(np.zeros(4), np.zeros(3), 0.1),
@@ -1039,3 +1044,8 @@ def test_unwrap_euler_nan_stays_local():
 def test_new_invalid_arguments_raise(call):
     with pytest.raises(ValueError):
         call()
+
+
+def test_non_integer_axis_is_a_type_error():
+    with pytest.raises(TypeError, match="axis must be an int"):
+        rj.unwrap_quaternion(np.zeros((5, 4)), axis=1.0)
