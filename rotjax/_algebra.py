@@ -16,6 +16,7 @@ from ._numerics import (
     as_float,
     check_shape,
     from_scalar_last,
+    like_rank,
     public,
     to_scalar_last,
 )
@@ -73,7 +74,8 @@ def quaternion_power(q, n, scalar_first: bool = False):
     (q, n), dt = as_float(q, n)
     check_shape(q, (4,), "q")
     q = to_scalar_last(q, scalar_first)
-    out = _rotvec_to_quat(n[..., None] * _quat_to_rotvec(q))
+    v = _quat_to_rotvec(q)
+    out = _rotvec_to_quat(like_rank(n, v[..., 0])[..., None] * v)
     return from_scalar_last(out, scalar_first).astype(dt)
 
 
@@ -275,4 +277,4 @@ def wahba_sensitivity(a, b, weights=None):
     BBt = jnp.einsum("...ij,...kj->...ik", B, B, precision=FULL)
     eye = jnp.eye(3, dtype=B.dtype)
     scale = (jnp.mean(weights, axis=-1) / zeta)[..., None, None]
-    return (scale * (kappa[..., None, None] * eye + BBt)).astype(dt)
+    return (scale * (kappa[..., None, None] * like_rank(eye, BBt) + BBt)).astype(dt)

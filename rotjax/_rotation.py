@@ -929,7 +929,7 @@ def _spline_coefficients(times, quat):
         eye = jnp.eye(3, dtype=r.dtype)
         M = jnp.zeros((m, 3, m, 3), r.dtype)
         k = jnp.arange(m)
-        M = M.at[k, :, k, :].set((4 * (1 / h[:-1] + 1 / h[1:]))[:, None, None] * eye)
+        M = M.at[k, :, k, :].set((4 * (1 / h[:-1] + 1 / h[1:]))[:, None, None] * eye[None])
         if m > 1:
             M = M.at[k[1:], :, k[:-1], :].set(2 / h[1:-1, None, None] * B[1:-1])
             M = M.at[k[:-1], :, k[1:], :].set(2 / h[1:-1, None, None] * A[1:-1])
