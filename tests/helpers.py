@@ -74,6 +74,10 @@ def fd_jacobian(f, x, h=1e-6):
 
 # Functions whose input has a set or time axis before the trailing one (besides the batch).
 SET_AXIS = ("quaternion_mean", "align_vectors", "align_vectors q-method", "unwrap_euler")
+# Calls whose inputs are not mapped over a leading batch as a whole: keyframes (Slerp,
+# RotationSpline), a time axis before the batch (the sampled integrator), a constant group.
+# Their batching is tested with them (tests/test_rotation.py, tests/test_kinematics.py).
+NOT_BATCHWISE = ("Slerp", "RotationSpline", "integrate_angular_velocity_samples", "rotation_group")
 
 
 # Oblique Davenport axes (the third axis is not perpendicular to the second's plane's normal).
