@@ -73,7 +73,13 @@ def fd_jacobian(f, x, h=1e-6):
 # --- one call of every public function ------------------------------------------------------
 
 # Functions whose input has a set or time axis before the trailing one (besides the batch).
-SET_AXIS = ("quaternion_mean", "align_vectors", "align_vectors q-method", "unwrap_euler")
+SET_AXIS = (
+    "quaternion_mean",
+    "align_vectors",
+    "align_vectors q-method",
+    "unwrap_euler",
+    "unwrap_quaternion",
+)
 # Calls whose inputs are not mapped over a leading batch as a whole: keyframes (Slerp,
 # RotationSpline), a time axis before the batch (the sampled integrator), a constant group.
 # Their batching is tested with them (tests/test_rotation.py, tests/test_kinematics.py).
@@ -152,16 +158,19 @@ def every_public(q, r, w, a):
         ),
         "unwrap_quaternion": (rj.unwrap_quaternion, (q,)),
         "euler_accelerations_to_angular_acceleration": (
-            lambda a, w: rj.euler_accelerations_to_angular_acceleration(a, w, w[::-1], "ZYX"),
+            lambda a, w: rj.euler_accelerations_to_angular_acceleration(a, w, w[..., ::-1], "ZYX"),
             (a, w),
         ),
         "angular_acceleration_to_euler_accelerations": (
             lambda a, w: rj.angular_acceleration_to_euler_accelerations(
-                a, w, w[::-1], "ZYX", damping=0.1
+                a, w, w[..., ::-1], "ZYX", damping=0.1
             ),
             (a, w),
         ),
-        "partition_coordinates": (lambda r: rj.partition_coordinates(r[:, :2]).influence, (r,)),
+        "partition_coordinates": (
+            lambda r: rj.partition_coordinates(r[..., :2, :]).influence,
+            (r,),
+        ),
         # the Rotation class and the functions it added
         "quaternion_to_mrp": (rj.quaternion_to_mrp, (q,)),
         "mrp_to_quaternion": (rj.mrp_to_quaternion, (w,)),
