@@ -791,4 +791,5 @@ def unwrap_quaternion(q, axis: int = 0, scalar_first: bool = False):
     dot = jnp.sum(jnp.where(ok[..., None], x, 0.0) * jnp.where(prev[..., None] >= 0, ref, 0.0), -1)
     sign = jnp.where(dot < 0, -1.0, 1.0).astype(x.dtype)
     flips = jnp.cumprod(sign, axis=0)
-    return jnp.moveaxis(x * flips[..., None], 0, axis).astype(dt)
+    out = jnp.where(ok[..., None], x * flips[..., None], x)  # bad samples as given
+    return jnp.moveaxis(out, 0, axis).astype(dt)

@@ -17,6 +17,6 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow],
 )
 # A longer search for local runs: pytest --hypothesis-profile=deep
-settings.register_profile("deep", parent=settings.get_profile("rotjax"), max_examples=2000)
+settings.register_profile("deep", parent=settings.get_profile("rotjax"), max_examples=600)
 settings.load_profile("rotjax")
 np.seterr(all="raise", under="ignore")  # underflow to 0 is fine in references

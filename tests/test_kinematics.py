@@ -984,6 +984,8 @@ def test_unwrap_quaternion_nan_stays_local():
     last finite one, so the rest of the series is what it would be without the bad sample."""
     q, flips = _smooth_series(12, (2,), seed=30)
     x = q * flips
+    if np.dot(x[0, 0], x[1, 0]) > 0:  # the bad samples come after a flip: -1 is carried
+        x[1:, 0] *= -1
     if np.dot(x[3, 0], x[6, 0]) > 0:  # make the sample after the gap need a flip
         x[6:, 0] *= -1
     bad = x.copy()
