@@ -91,10 +91,9 @@ def _from_matrix_checked(matrix):
     return jnp.where((det > 0)[..., None], q, jnp.nan)
 
 
-@functools.partial(jax.jit, static_argnames=("normalize", "scalar_first"))
-def _prepare_quat(q, normalize, scalar_first):
-    q = to_scalar_last(_float(q), scalar_first)
-    return quaternion_normalize(q) if normalize else q
+@functools.partial(jax.jit, static_argnames="scalar_first")
+def _scalar_last(q, scalar_first):
+    return to_scalar_last(_float(q), scalar_first)
 
 
 @jax.jit
@@ -126,8 +125,8 @@ def _is_key(x) -> bool:
 class Rotation:
     """Rotations in 3 dimensions, scipy's ``Rotation`` API on one JAX array.
 
-    A ``Rotation`` holds a ``(..., 4)`` unit quaternion ``[x, y, z, w]`` (scalar last), the
-    only leaf of the pytree: ``jax.jit`` can take and return it, ``jax.vmap`` maps over its
+    A ``Rotation`` holds a ``(..., 4)`` quaternion ``[x, y, z, w]`` (scalar last), the only
+    leaf of the pytree: ``jax.jit`` can take and return it, ``jax.vmap`` maps over its
     leading (batch) axes, ``jax.grad`` differentiates through its methods and ``lax.scan``
     carries it. A 1-D quaternion is a *single* rotation (``single`` is ``True``; no ``len``, no
     indexing); ``(..., 4)`` holds a batch of shape ``shape``. float32 and float64 are kept.
@@ -151,54 +150,73 @@ class Rotation:
         scalar_first: ``quat`` is ``[w, x, y, z]``.
     """
 
-    __slots__ = ("_quat",)
+    # The leaf is the quaternion as given (scalar last): the readers (as_matrix, as_euler,
+    # apply, ...) accept any norm, so from_quat(q).as_euler(seq) compiles to exactly
+    # quaternion_to_euler(q, seq). ``_unit`` (static) says whether it is already unit; the
+    # other methods and as_quat read the normalised ``_quat``.
+    __slots__ = ("_stored", "_unit")
 
     def __init__(self, quat, normalize: bool = True, copy: bool = True, scalar_first: bool = False):
         del copy  # JAX arrays are immutable: there is nothing to copy
         normalize = _check_static("normalize", normalize)
         scalar_first = _check_static("scalar_first", scalar_first)
         host = _concrete(quat)
-        # Host input goes to the jitted function as it is: one dispatch, no separate transfer.
         q = host if host is not None else _float(quat)
         if q.ndim < 1 or q.shape[-1] != 4:
             raise ValueError(f"Expected `quat` to have shape (..., 4), got {q.shape}.")
         if host is not None and normalize and not host.any(axis=-1).all():
             raise ValueError("Found zero norm quaternions in `quat`.")
-        self._quat = _prepare_quat(q, normalize=normalize, scalar_first=scalar_first)
+        # No device work here: a host array is kept as it is (in JAX's dtype for it) and goes to
+        # the device with the first method's call, in the same dispatch; scalar-first input is
+        # reordered.
+        if scalar_first:
+            q = _scalar_last(q, scalar_first)
+        elif host is not None:
+            q = host.astype(jax.dtypes.canonicalize_dtype(host.dtype), copy=False)
+        self._stored = q
+        self._unit = not normalize
 
     # --- pytree -------------------------------------------------------------------------
 
     def tree_flatten(self):
-        return (self._quat,), None
+        return (self._stored,), self._unit
 
     @classmethod
     def tree_unflatten(cls, aux, children):
-        return cls._raw(children[0])
+        return cls._raw(children[0], aux)
 
     @classmethod
-    def _raw(cls, quat):
-        """A rotation holding ``quat`` as it is (no check, no normalisation)."""
+    def _raw(cls, quat, unit: bool = True):
+        """A rotation holding ``quat`` as it is (no check); ``unit``: it is a unit quaternion
+        (else it is normalised where a method needs it)."""
         r = object.__new__(cls)
-        r._quat = quat
+        r._stored = quat
+        r._unit = unit
         return r
+
+    @property
+    def _quat(self):
+        """The unit quaternion, scalar last."""
+        return jnp.asarray(self._stored) if self._unit else quaternion_normalize(self._stored)
 
     def __getstate__(self):
         return np.asarray(self._quat)
 
     def __setstate__(self, state):
-        self._quat = jnp.asarray(state)
+        self._stored = jnp.asarray(state)
+        self._unit = True
 
     # --- shape ---------------------------------------------------------------------------
 
     @property
     def single(self) -> bool:
         """Whether this is a single rotation (a 1-D quaternion)."""
-        return self._quat.ndim == 1
+        return self._stored.ndim == 1
 
     @property
     def shape(self) -> tuple[int, ...]:
         """The batch shape: the quaternion's shape without its last axis."""
-        return tuple(self._quat.shape[:-1])
+        return tuple(self._stored.shape[:-1])
 
     @property
     def quat(self):
@@ -209,7 +227,7 @@ class Rotation:
         """Length of the first batch axis. Raises TypeError for a single rotation."""
         if self.single:
             raise TypeError("Single rotation has no len().")
-        return self._quat.shape[0]
+        return self._stored.shape[0]
 
     def __bool__(self) -> bool:
         return True
@@ -217,7 +235,7 @@ class Rotation:
     def __iter__(self):
         if self.single:
             raise TypeError("Single rotation is not iterable.")
-        return (Rotation._raw(self._quat[i]) for i in range(self._quat.shape[0]))
+        return (Rotation._raw(self._stored[i], self._unit) for i in range(len(self)))
 
     def _index(self, indexer):
         if self.single:
@@ -230,7 +248,7 @@ class Rotation:
 
     def __getitem__(self, indexer) -> Rotation:
         """Rotations selected by ``indexer`` over the batch axes (as NumPy indexing)."""
-        return Rotation._raw(self._quat[self._index(indexer)])
+        return Rotation._raw(self._stored[self._index(indexer)], self._unit)
 
     def __setitem__(self, indexer, value: Rotation):
         """Replace the selected rotations by ``value``.
@@ -242,7 +260,9 @@ class Rotation:
         idx = self._index(indexer)
         if not isinstance(value, Rotation):
             raise TypeError("value must be a Rotation object")
-        self._quat = self._quat.at[idx].set(value.as_quat().astype(self._quat.dtype))
+        q = self._quat
+        self._stored = q.at[idx].set(value.as_quat().astype(q.dtype))
+        self._unit = True
 
     def __repr__(self) -> str:
         m = repr(np.asarray(self.as_matrix())).splitlines()
@@ -537,15 +557,15 @@ class Rotation:
 
     def as_matrix(self):
         """Active rotation matrices, ``(..., 3, 3)`` (``v_world = R @ v_body``)."""
-        return quaternion_to_matrix(self._quat)
+        return quaternion_to_matrix(self._stored)
 
     def as_rotvec(self, degrees: bool = False):
         """Rotation vectors ``angle * axis`` with angle in ``[0, pi]``, ``(..., 3)``."""
-        return quaternion_to_rotvec(self._quat, degrees=degrees)
+        return quaternion_to_rotvec(self._stored, degrees=degrees)
 
     def as_mrp(self):
         """Modified Rodrigues parameters with norm at most 1, ``(..., 3)``."""
-        return quaternion_to_mrp(self._quat)
+        return quaternion_to_mrp(self._stored)
 
     def as_euler(self, seq: str, degrees: bool = False, *, suppress_warnings: bool = False):
         """Euler angles, ``(..., 3)``, in scipy's ranges (see :func:`quaternion_to_euler`).
@@ -560,7 +580,7 @@ class Rotation:
         if not isinstance(seq, str) or len(seq) != 3:
             raise ValueError(f"Expected 3 axes, got {seq!r}.")
         parse_seq(seq)
-        return quaternion_to_euler(self._quat, seq, degrees=degrees)
+        return quaternion_to_euler(self._stored, seq, degrees=degrees)
 
     def as_davenport(self, axes, order: str, degrees: bool = False, *, suppress_warnings=False):
         """Davenport angles about three axes, consecutive ones orthogonal, ``(..., 3)``.
@@ -576,7 +596,7 @@ class Rotation:
         """
         del suppress_warnings
         extrinsic = parse_order(order)
-        ax = _float(axes, self._quat.dtype)
+        ax = _float(axes, self._stored.dtype)
         if ax.ndim < 2 or ax.shape[-2] != 3:
             raise ValueError(f"Expected 3 axes, got {ax.shape}.")
         if ax.shape[-1] != 3:
@@ -586,14 +606,14 @@ class Rotation:
         except ValueError:
             raise ValueError(
                 f"Expected `axes` to match number of rotations, got {ax.shape} axes and "
-                f"{self._quat.shape} rotations."
+                f"{self._stored.shape} rotations."
             ) from None
         host = _concrete(axes)
         if host is not None:
             h = host / np.linalg.norm(host, axis=-1, keepdims=True)
             if np.any(np.abs(np.sum(h[..., :-1, :] * h[..., 1:, :], axis=-1)) > 1e-7):
                 raise ValueError("Consecutive axes must be orthogonal.")
-        return quaternion_to_davenport(self._quat, ax, extrinsic=extrinsic, degrees=degrees)
+        return quaternion_to_davenport(self._stored, ax, extrinsic=extrinsic, degrees=degrees)
 
     # --- algebra -------------------------------------------------------------------------
 
@@ -626,12 +646,12 @@ class Rotation:
             e = e[0]
         if e.ndim != 0:
             raise ValueError("Array exponent must be a scalar")
-        e = jnp.broadcast_to(e.astype(self._quat.dtype), self.shape)
+        e = jnp.broadcast_to(e.astype(self._stored.dtype), self.shape)
         return Rotation._raw(quaternion_power(self._quat, e))
 
     def inv(self) -> Rotation:
         """The inverse rotation(s)."""
-        return Rotation._raw(quaternion_conjugate(self._quat))
+        return Rotation._raw(quaternion_conjugate(self._stored), self._unit)
 
     def apply(self, vectors, inverse: bool = False):
         """Rotate vectors: ``R @ v`` (``R.T @ v`` with ``inverse``).
@@ -644,7 +664,7 @@ class Rotation:
             ``(..., 3)`` rotated vectors, in the rotation's dtype.
         """
         host = _concrete(vectors)
-        v = host.astype(self._quat.dtype) if host is not None else _float(vectors, self._quat.dtype)
+        v = host.astype(self._stored.dtype) if host is not None else _float(vectors, self._stored.dtype)
         if v.ndim < 1 or v.shape[-1] != 3:
             raise ValueError(f"Expected input of shape (..., 3), got {v.shape}.")
         try:
@@ -653,11 +673,11 @@ class Rotation:
             raise ValueError(
                 f"Cannot broadcast {self.shape} rotations to {v.shape[:-1]} vectors."
             ) from None
-        return _apply(self._quat, v, inverse=inverse)
+        return _apply(self._stored, v, inverse=inverse)
 
     def magnitude(self):
         """Rotation angles in ``[0, pi]``, shape ``shape``."""
-        return rotation_angle(self._quat)
+        return rotation_angle(self._stored)
 
     def approx_equal(self, other: Rotation, atol=None, degrees: bool = False):
         """Whether the angle between the rotations is below ``atol`` (default 1e-8 rad)."""
@@ -783,9 +803,9 @@ def _align(a, b, w):
 
 def _keyframe_times(times, rotations, dim_msg, order_msg):
     """Keyframe times as a 1-D array matching ``rotations`` (scipy's checks and messages)."""
-    if rotations._quat.ndim > 2:
+    if rotations._stored.ndim > 2:
         raise ValueError("Rotations with more than 1 leading dimension are not supported.")
-    t = _float(times, rotations._quat.dtype)
+    t = _float(times, rotations._stored.dtype)
     if t.ndim != 1:
         raise ValueError(dim_msg)
     if t.shape[0] != len(rotations):

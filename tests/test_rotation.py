@@ -390,3 +390,22 @@ def test_jit_class_compiles_to_the_functions_program():
         )
     )
     assert ops(cls, q, v) == ops(fun, q, v)
+    # The readers take the quaternion as given (any norm): one conversion, no normalisation.
+    pairs = [
+        (
+            lambda q: Rotation.from_quat(q).as_euler("xyz"),
+            lambda q: rotjax.quaternion_to_euler(q, "xyz"),
+        ),
+        (lambda q: Rotation.from_quat(q).as_matrix(), rotjax.quaternion_to_matrix),
+        (
+            lambda q: Rotation.from_quat(q).inv().as_rotvec(),
+            lambda q: rotjax.quaternion_to_rotvec(rotjax.quaternion_conjugate(q)),
+        ),
+        (lambda q: Rotation.from_quat(q).apply(V), lambda q: rotjax.quaternion_apply(q, V)),
+        (
+            lambda q: Rotation.from_rotvec(q[:, :3]).as_quat(),
+            lambda q: rotjax.rotvec_to_quaternion(q[:, :3]),
+        ),
+    ]
+    for cls, fun in pairs:
+        assert ops(jax.jit(cls), q) == ops(jax.jit(fun), q)

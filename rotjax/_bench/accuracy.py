@@ -346,6 +346,21 @@ def quaternion_to_matrix_errors(ev):
     return errs
 
 
+def nined_to_matrix_errors(ev):
+    """Componentwise, against the matrix of the nearest rotation (the matrix sets)."""
+    acc = ev.acc
+    got = ev.run_sets({k: v.reshape(len(v), 9) for k, v in acc.msets.items()})
+    return {
+        k: abs(v - np_matrix(acc.mq_ref[k])).reshape(len(v), -1).max(-1) for k, v in got.items()
+    }
+
+
+def no_errors(ev):
+    """No accuracy columns: these rows time a fitting problem or a series, whose accuracy the
+    test suite checks against mpmath and closed-form motions."""
+    return {}
+
+
 def quaternion_to_rotvec_errors(ev):
     """Componentwise, against the rotation vector of angle in [0, pi]."""
     import numpy as np

@@ -39,6 +39,7 @@ class Case:
         grad: time ``jit(grad(sum(f)))`` too.
         jaxlie: ``SO3 -> (fn, pre)``: jaxlie's call in its own layout and the conversion of
             rotjax's input to it, done once outside the timing.
+        eager: time one call on the batch's first element (False where that is not an input).
     """
 
     op: str
@@ -49,6 +50,7 @@ class Case:
     low_precision: bool = False
     grad: bool = True
     jaxlie: Callable | None = None
+    eager: bool = True
 
 
 # --- inputs: ``(rng, unit quaternions (n, 4) float64) -> float64 batch`` ------------------------
@@ -59,11 +61,36 @@ def _omega(rng, q):
     return np.concatenate([q, rng.normal(size=(len(q), 3))], axis=1)
 
 
+# The fitting rows: one "rotation" of the batch is one problem of GROUP vector pairs or
+# quaternions; the integrator's is one time step of a series of STEPS samples.
+GROUP = 8
+STEPS = 1024
+
+
+def _vector_pairs(rng, q):
+    """Problems of GROUP pairs ``(a_i, b_i)``, ``b_i = R a_i + noise``: (n, GROUP, 2, 3)."""
+    a = rng.normal(size=(len(q), GROUP, 3))
+    b = np.einsum("nij,nkj->nki", A.np_matrix(q), a) + 0.01 * rng.normal(size=a.shape)
+    return np.stack([a, b], axis=2)
+
+
+def _quaternion_groups(rng, q):
+    """Groups of GROUP quaternions within about 0.1 rad of each other: (n, GROUP, 4)."""
+    x = q[:, None, :] + 0.05 * rng.normal(size=(len(q), GROUP, 4))
+    return x / np.linalg.norm(x, axis=-1, keepdims=True)
+
+
 INPUTS = {
     "quaternion": lambda rng, q: q,
     "matrix": lambda rng, q: A.np_matrix(q),
+    "noisy_nined": lambda rng, q: (A.np_matrix(q) + 0.1 * rng.normal(size=(len(q), 3, 3))).reshape(
+        -1, 9
+    ),
     "rotvec": lambda rng, q: 0.7 * rng.normal(size=(len(q), 3)),
     "quaternion_omega": _omega,
+    "vector_pairs": _vector_pairs,
+    "quaternion_groups": _quaternion_groups,
+    "omega": lambda rng, q: rng.normal(size=(len(q), 3)),
 }
 
 
@@ -140,6 +167,15 @@ def jaxlie_builder(peers, build: str):
     return [Contender("jaxlie", "", lambda x: jnp.roll(jax.vmap(fn)(x).wxyz, -1, -1), True)]
 
 
+def rotation_class(build: str, read: str, *args):
+    """``rotjax.Rotation.<build>(x).<read>(*args)``: the class against its functions."""
+    from .. import Rotation
+
+    return Contender(
+        "rotjax", "Rotation", lambda x: getattr(getattr(Rotation, build)(x), read)(*args), True
+    )
+
+
 def ordered(*groups):
     """rotjax first, in the order given, then jax.scipy, jaxlie, scipy (the tables' order)."""
     rank = {"rotjax": 0, "jax.scipy": 1, "jaxlie": 2, "scipy": 3}
@@ -160,6 +196,48 @@ def _integrate(method):
         return integrate_angular_velocity(x[..., :4], x[..., 4:], 0.01, method=method)
 
     return Contender("rotjax", method, f, True)
+
+
+def _integrate_samples(method):
+    from .._kinematics import integrate_angular_velocity_samples
+
+    def f(x):  # (n, 3) -> STEPS samples of n / STEPS series, from the identity
+        omega = x.reshape(STEPS, -1, 3)
+        q0 = np.array([0.0, 0.0, 0.0, 1.0], x.dtype)
+        q = integrate_angular_velocity_samples(q0, omega, 0.01, method=method)
+        return q.reshape(-1, 4)
+
+    return Contender("rotjax", method, f, True)
+
+
+def _align(x, method="svd"):
+    from .. import align_vectors
+
+    return align_vectors(x[..., 0, :], x[..., 1, :], method=method)
+
+
+def _bare_svd_of_b(x):
+    """A batched SVD of the problems' ``B = sum_i b_i a_i^T``: the LAPACK baseline."""
+    import jax.numpy as jnp
+
+    B = jnp.einsum("...ki,...kj->...ij", x[..., 1, :], x[..., 0, :])
+    return jnp.linalg.svd(B)
+
+
+def _bare_svd_projection(x):
+    """The special-orthogonal polar factor by a batched SVD: ``U diag(1, 1, det) V^T``."""
+    import jax.numpy as jnp
+
+    u, _, vt = jnp.linalg.svd(x.reshape(*x.shape[:-1], 3, 3))
+    d = jnp.linalg.det(u @ vt)
+    return (u * jnp.stack([jnp.ones_like(d), jnp.ones_like(d), d], axis=-1)[..., None, :]) @ vt
+
+
+def _bare_eigh_mean(q):
+    """The top eigenvector of ``sum_i q_i q_i^T`` by a batched ``eigh``: the LAPACK baseline."""
+    import jax.numpy as jnp
+
+    return jnp.linalg.eigh(jnp.einsum("...ki,...kj->...ij", q, q))[1][..., -1]
 
 
 # --- jaxlie in its own layout: ``SO3 -> (fn, pre)`` ------------------------------------------
@@ -207,6 +285,7 @@ CASES = {
             "quaternion",
             lambda p: ordered(
                 [rotjax_fn("quaternion_to_euler", "", SEQ)],
+                [rotation_class("from_quat", "as_euler", SEQ)],
                 scipy_like(p, "from_quat", "as_euler", SEQ),
                 jaxlie_reader(p, _rpy),
             ),
@@ -229,6 +308,7 @@ CASES = {
             "quaternion",
             lambda p: ordered(
                 [rotjax_fn("quaternion_to_matrix")],
+                [rotation_class("from_quat", "as_matrix")],
                 scipy_like(p, "from_quat", "as_matrix"),
                 jaxlie_reader(p, lambda r: r.as_matrix()),
             ),
@@ -252,6 +332,7 @@ CASES = {
             "rotvec",
             lambda p: ordered(
                 [rotjax_fn("rotvec_to_quaternion")],
+                [rotation_class("from_rotvec", "as_quat")],
                 scipy_like(p, "from_rotvec", "as_quat"),
                 jaxlie_builder(p, "exp"),
             ),
@@ -265,6 +346,40 @@ CASES = {
             A.integration_step_errors,
             quick=True,
             grad=False,
+        ),
+        Case(
+            "integrate_angular_velocity_samples",
+            "omega",
+            lambda p: [_integrate_samples(m) for m in ("magnus4", "trapezoid", "hold")],
+            A.no_errors,
+            eager=False,
+        ),
+        Case(
+            "nined_to_matrix",
+            "noisy_nined",
+            lambda p: [
+                rotjax_fn("nined_to_matrix"),
+                Contender("jnp.linalg", "svd", _bare_svd_projection, True),
+            ],
+            A.nined_to_matrix_errors,
+        ),
+        Case(
+            "align_vectors",
+            "vector_pairs",
+            lambda p: [
+                Contender("rotjax", "svd", _align, True),
+                Contender("jnp.linalg", "svd of B", _bare_svd_of_b, True),
+            ],
+            A.no_errors,
+        ),
+        Case(
+            "quaternion_mean",
+            "quaternion_groups",
+            lambda p: [
+                rotjax_fn("quaternion_mean"),
+                Contender("jnp.linalg", "eigh", _bare_eigh_mean, True),
+            ],
+            A.no_errors,
         ),
     ]
 }

@@ -94,6 +94,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--log2-batch", type=int, default=None, help="batch of 2^N rotations (default 20; 16 quick)"
     )
+    p.add_argument(
+        "--merge-into",
+        default=None,
+        metavar="JSON",
+        help="also replace the measured operations' rows in this bench.json (a full run of the "
+        "same batch), noting the run's date, then regenerate reports with 'bench report'",
+    )
+    p.add_argument(
+        "--why", default="", help="with --merge-into: why these rows were measured again"
+    )
     args = p.parse_args(argv)
     from .cases import CASES
 
@@ -134,6 +144,11 @@ def main(argv: list[str] | None = None) -> int:
             if r[k] is not None:
                 r[k] = report.finite_or_none(r[k])
     (out_dir / "bench.json").write_text(report.dumps(meta, rows))
+    if args.merge_into:
+        path = Path(args.merge_into)
+        merged = report.merge(*report.load(path), meta, rows, args.why)
+        path.write_text(report.dumps(*merged))
+        log(f"[bench] merged {sorted({r['op'] for r in rows})} into {path}")
     (out_dir / "bench.txt").write_text(text + "\n")
     print(text)
     if report.write_plot(meta, rows, out_dir / "bench.png"):

@@ -62,6 +62,35 @@ def dumps(meta, rows) -> str:
     return json.dumps({"meta": meta, "rows": rows}, indent=1, allow_nan=False)
 
 
+def _later_runs(meta) -> list[dict]:
+    later = meta.get("rows_from_a_later_run") or []
+    return [later] if isinstance(later, dict) else list(later)
+
+
+def merge(meta, rows, new_meta, new_rows, why=""):
+    """``(meta, rows)`` with the operations of ``new_rows`` replaced by them, in the registry's
+    order, and the later run noted in ``meta["rows_from_a_later_run"]``. The two runs must
+    share the batch size and device."""
+    from .cases import CASES
+
+    for key in ("batch", "device"):
+        if meta.get(key) != new_meta.get(key):
+            raise ValueError(
+                f"cannot merge a run of {key} {new_meta.get(key)!r} into one of {meta.get(key)!r}"
+            )
+    ops = {r["op"] for r in new_rows}
+    kept = [r for r in rows if r["op"] not in ops]
+    order = {op: i for i, op in enumerate(CASES)}
+    merged = sorted(kept + new_rows, key=lambda r: order.get(r["op"], len(order)))  # stable
+    later = [{**e, "ops": [op for op in e["ops"] if op not in ops]} for e in _later_runs(meta)]
+    later = [e for e in later if e["ops"]]
+    entry = {"ops": sorted(ops, key=order.get), "date": new_meta["date"]}
+    entry.update(seconds=new_meta.get("seconds"), versions=new_meta.get("versions"))
+    if why:
+        entry["why"] = why
+    return {**meta, "rows_from_a_later_run": later + [entry]}, merged
+
+
 def contender(r) -> str:
     """``impl`` or ``impl:method``: one label per contender."""
     return r["impl"] + (f":{r['method']}" if r["method"] else "")
@@ -115,8 +144,7 @@ def provenance(meta) -> str:
         + ("; --quick" if meta.get("quick") else "")
         + "."
     )
-    later = meta.get("rows_from_a_later_run")
-    if later:
+    for later in _later_runs(meta):
         line += f" Rows of {', '.join(later['ops'])} from a run of {later['date']}."
     return line
 

@@ -130,7 +130,11 @@ def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
                     row["grad_over_fwd"] = T.median_ratio(t, tg)
                 # --quick times single calls of rotjax and scipy only: the JAX peers' first
                 # eager call compiles op by op (seconds), and the targets compare with scipy.
-                if dt in ("float32", "float64") and not (quick and impl in ("jax.scipy", "jaxlie")):
+                if (
+                    case.eager
+                    and dt in ("float32", "float64")
+                    and not (quick and impl in ("jax.scipy", "jaxlie"))
+                ):
                     # One rotation, unbatched (jaxlie's adapters vmap, so they get a batch of 1).
                     # rotjax's public functions jit-wrap themselves; jax.scipy runs op by op.
                     x1_np = np.array(x1, np.float64 if dt == "float64" else np.float32)
