@@ -664,7 +664,8 @@ class Rotation:
             ``(..., 3)`` rotated vectors, in the rotation's dtype.
         """
         host = _concrete(vectors)
-        v = host.astype(self._stored.dtype) if host is not None else _float(vectors, self._stored.dtype)
+        dtype = self._stored.dtype
+        v = host.astype(dtype) if host is not None else _float(vectors, dtype)
         if v.ndim < 1 or v.shape[-1] != 3:
             raise ValueError(f"Expected input of shape (..., 3), got {v.shape}.")
         try:
