@@ -164,15 +164,13 @@ def _dk_pattern():
 _DK_PATTERN = _dk_pattern()
 
 
-@_shepperd.defjvp
-def _shepperd_jvp(primals, tangents):
+def _shepperd_tangent(R, dR):
     # JAX's derivative of _shepperd, term by term: R1 = s R (s a constant power of two),
     # t = h rsqrt(h) with h = |R1|^2 / 3, so dt = tau dh, tau = y (1 - h y^2 / 2), y = rsqrt(h)
     # (rsqrt's rule); dc = dK e_i for the selected column i (the masks are constant);
     # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc. dR enters only through
     # u_a = sum(M_a * dR) with M_a = z s (dK[a, i] / dR + (2/3) tau R1 [a = i]), elementwise
     # products whose transpose (reverse mode) is one loop writing the cotangent of R.
-    (R,), (dR,) = primals, tangents
     R1, f2, s = _prescaled(R)
     h = f2 / 3
     y = rsqrt(h)
@@ -190,7 +188,13 @@ def _shepperd_jvp(primals, tangents):
         m = sum(sel[b] * like_rank(_DK_PATTERN[a, b], R) for b in range(4)) + sel[a] * dt
         u.append(jnp.sum((zs * m) * dR, axis=(-2, -1)))
     qu = sum(q[a] * u[a] for a in range(4))
-    return _shepperd(R), jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
+    return jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
+
+
+@_shepperd.defjvp
+def _shepperd_jvp(primals, tangents):
+    (R,), (dR,) = primals, tangents
+    return _shepperd(R), _shepperd_tangent(R, dR)
 
 
 def _signed_norm(c, sq):
@@ -207,12 +211,21 @@ def _divide_stacked(parts, n):
     return jnp.stack(parts, axis=-1) / jnp.stack([n] * len(parts), axis=-1)
 
 
+@jax.custom_jvp
 def _shepperd_divided(R):
     """The Shepperd quaternion as the selected column divided by its signed norm (stacked, see
     :func:`_divide_stacked`), for ``matrix_to_euler``: XLA:CPU writes it out once, where with
-    a reciprocal square root it recomputed parts of it inside the Euler extraction."""
+    a reciprocal square root it recomputed parts of it inside the Euler extraction. The same
+    function as :func:`_shepperd` up to rounding, with the same derivative rule (tested equal
+    to JAX's derivative of this code)."""
     c, sq = _selected_column(R)
     return _divide_stacked(c, _signed_norm(c, sq))
+
+
+@_shepperd_divided.defjvp
+def _shepperd_divided_jvp(primals, tangents):
+    (R,), (dR,) = primals, tangents
+    return _shepperd_divided(R), _shepperd_tangent(R, dR)
 
 
 def _k_times(cols, p):

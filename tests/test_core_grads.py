@@ -364,11 +364,14 @@ def test_euler_to_matrix_grads_at_lock(seq):
         check_grads(lambda x: rj.euler_to_quaternion(x, seq), (a,), 1, modes=("fwd", "rev"))
 
 
-def test_shepperd_hand_written_derivative_equals_autodiff_of_its_formula():
+@pytest.mark.parametrize("which", ["_shepperd", "_shepperd_divided"])
+def test_shepperd_hand_written_derivative_equals_autodiff_of_its_formula(which):
     """The Shepperd rule (and its transpose) equals JAX's derivative of the forward code on
-    rotations, special matrices, noisy and scaled matrices and random ones."""
-    from rotjax._matrix import _shepperd
+    rotations, special matrices, noisy and scaled matrices and random ones; for both forms
+    (reciprocal root, and the division used by matrix_to_euler)."""
+    import rotjax._matrix
 
+    _shepperd = getattr(rotjax._matrix, which)
     rng = np.random.default_rng(11)
     base = np.stack(
         [SPECIAL_MATRICES[k] for k in sorted(SPECIAL_MATRICES)]
