@@ -274,8 +274,9 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
             * ``"markley"``: the Shepperd column followed by one power-iteration step with ``K``.
               About 35 more flops; brings noisy matrices to within O(sigma^2) of optimal.
             * ``"optimal"``: the quaternion of the nearest rotation (Bar-Itzhack 2000): the top
-              eigenvector of the symmetric 4x4 ``K`` by ``jnp.linalg.eigh``, then one power
-              step with ``K``, which removes the eigensolver's own rounding error. Slowest.
+              eigenvector of the symmetric 4x4 ``K`` by rotjax's elementwise eigen kernel
+              (fixed Jacobi sweeps, then one power step; no LAPACK). Any input, ``det < 0``
+              included. Slowest: see the performance page.
         scalar_first: return ``(w, x, y, z)``.
 
     Returns:

@@ -122,12 +122,12 @@ _TABLE = (
 
 def table(rows) -> str:
     """The fixed-width text table printed by a run."""
-    head = f"{'operation':<27}{'impl':<10}{'method':<12}{'dtype':<9}"
+    head = f"{'operation':<35}{'impl':<11}{'method':<12}{'dtype':<9}"
     head += "".join(f"{h:>{w}}" for h, w, _, _ in _TABLE)
     lines = [head, "-" * len(head)]
     for r in rows:
         cells = "".join(_fmt(get(r), f"{w}{spec}") for _, w, get, spec in _TABLE)
-        lines.append(f"{r['op']:<27}{r['impl']:<10}{r['method'] or '-':<12}{r['dtype']:<9}{cells}")
+        lines.append(f"{r['op']:<35}{r['impl']:<11}{r['method'] or '-':<12}{r['dtype']:<9}{cells}")
     return "\n".join(lines)
 
 
