@@ -57,12 +57,14 @@ def _concrete(x) -> np.ndarray | None:
     """
     if isinstance(x, jax.Array):  # tracers are jax.Array instances too
         return None
-    _check_array("input", x)
     try:
         a = np.asarray(x)
-        return a if np.issubdtype(a.dtype, np.floating) else a.astype(float)
     except (TypeError, ValueError):
         return None
+    kind = a.dtype.kind  # dtype kinds, not issubdtype: this runs on every eager call
+    if kind == "c":
+        _check_array("input", a)  # raises the TypeError for complex input
+    return a if kind == "f" else a.astype(float) if kind in "biu" else None
 
 
 def _broadcast(*arrays, trailing, what="Cannot broadcast the batch shapes"):
@@ -164,7 +166,11 @@ class Rotation:
         q = host if host is not None else _float(quat)
         if q.ndim < 1 or q.shape[-1] != 4:
             raise ValueError(f"Expected `quat` to have shape (..., 4), got {q.shape}.")
-        if host is not None and normalize and not host.any(axis=-1).all():
+        if (
+            host is not None
+            and normalize
+            and not (host.any() if q.ndim == 1 else host.any(-1).all())
+        ):
             raise ValueError("Found zero norm quaternions in `quat`.")
         # No device work here: a host array is kept as it is (in JAX's dtype for it) and goes to
         # the device with the first method's call, in the same dispatch; scalar-first input is
