@@ -67,6 +67,16 @@ def _concrete(x) -> np.ndarray | None:
     return a if kind == "f" else a.astype(float) if kind in "biu" else None
 
 
+def _input(x):
+    """A constructor's input: a host value stays in NumPy (in JAX's dtype for it) and goes to
+    the device with the one jitted call that reads it, which costs less than a transfer of
+    its own; anything else as a JAX float array."""
+    host = _concrete(x)
+    if host is None:
+        return _float(x)
+    return host.astype(jax.dtypes.canonicalize_dtype(host.dtype), copy=False)
+
+
 def _broadcast(*arrays, trailing, what="Cannot broadcast the batch shapes"):
     """Broadcast the leading (batch) shapes explicitly, so that rank promotion is never
     implicit; ``trailing`` gives each array's core rank."""
@@ -162,23 +172,17 @@ class Rotation:
         del copy  # JAX arrays are immutable: there is nothing to copy
         normalize = _check_static("normalize", normalize)
         scalar_first = _check_static("scalar_first", scalar_first)
-        host = _concrete(quat)
-        q = host if host is not None else _float(quat)
+        q = _input(quat)
         if q.ndim < 1 or q.shape[-1] != 4:
             raise ValueError(f"Expected `quat` to have shape (..., 4), got {q.shape}.")
-        if (
-            host is not None
-            and normalize
-            and not (host.any() if q.ndim == 1 else host.any(-1).all())
-        ):
+        host = isinstance(q, np.ndarray)
+        # (a single quaternion is checked in Python: a NumPy reduction here slowed the
+        # jitted call that follows by more than its own cost)
+        if host and normalize and not (any(q.tolist()) if q.ndim == 1 else q.any(-1).all()):
             raise ValueError("Found zero norm quaternions in `quat`.")
-        # No device work here: a host array is kept as it is (in JAX's dtype for it) and goes to
-        # the device with the first method's call, in the same dispatch; scalar-first input is
-        # reordered.
+        # No device work here (a host array is kept as it is); scalar-first input is reordered.
         if scalar_first:
             q = _scalar_last(q, scalar_first)
-        elif host is not None:
-            q = host.astype(jax.dtypes.canonicalize_dtype(host.dtype), copy=False)
         self._stored = q
         self._unit = not normalize
 
@@ -203,7 +207,10 @@ class Rotation:
     @property
     def _quat(self):
         """The unit quaternion, scalar last."""
-        return jnp.asarray(self._stored) if self._unit else quaternion_normalize(self._stored)
+        q = self._stored
+        if not self._unit:
+            return quaternion_normalize(q)
+        return q if isinstance(q, jax.Array) else jnp.asarray(q)  # (asarray is not free)
 
     def __getstate__(self):
         return np.asarray(self._quat)
@@ -300,13 +307,12 @@ class Rotation:
             assume_valid: the matrices are rotations: use the cheaper ``"shepperd"`` method,
                 with no check.
         """
-        m = _float(matrix)
+        m = _input(matrix)
         if m.ndim < 2 or m.shape[-2:] != (3, 3):
             raise ValueError(f"Expected `matrix` to have shape (..., 3, 3), got {m.shape}")
         if assume_valid:
             return Rotation._raw(matrix_to_quaternion(m, method="shepperd"))
-        host = _concrete(matrix)
-        if host is not None and np.any(np.linalg.det(host) <= 0):
+        if isinstance(m, np.ndarray) and np.any(np.linalg.det(m) <= 0):
             raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
         return Rotation._raw(_from_matrix_checked(m))
 
@@ -318,7 +324,7 @@ class Rotation:
             rotvec: ``(..., 3)`` rotation vectors (radians, or degrees with ``degrees``).
             degrees: the norms are in degrees.
         """
-        v = _float(rotvec)
+        v = _input(rotvec)
         if v.ndim < 1 or v.shape[-1] != 3:
             raise ValueError(f"Expected `rot_vec` to have shape (..., 3), got {v.shape}")
         return Rotation._raw(rotvec_to_quaternion(v, degrees=degrees))
@@ -326,7 +332,7 @@ class Rotation:
     @staticmethod
     def from_mrp(mrp) -> Rotation:
         """From modified Rodrigues parameters ``axis * tan(angle / 4)``, shape ``(..., 3)``."""
-        p = _float(mrp)
+        p = _input(mrp)
         if p.ndim < 1 or p.shape[-1] != 3:
             raise ValueError(f"Expected `mrp` to have shape (..., 3), got {p.shape}")
         return Rotation._raw(mrp_to_quaternion(p))
@@ -348,7 +354,7 @@ class Rotation:
                 "Expected axis specification to be a non-empty string of up to 3 "
                 f"characters, got {seq!r}"
             )
-        a = _float(angles)
+        a = _input(angles)
         if a.ndim == 0:
             a = a[None]
         k = len(seq)
