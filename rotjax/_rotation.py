@@ -27,7 +27,7 @@ from ._fitting import quaternion_mean
 from ._kinematics import quaternion_derivative_to_angular_velocity
 from ._matrix import matrix_to_quaternion
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
-from ._numerics import _check_array, _check_static, cross, eps, matvec, safe_atan2, to_scalar_last
+from ._numerics import _check_array, _check_static, cross, matvec, safe_atan2, to_scalar_last
 from ._quaternion import (
     angle_between,
     quaternion_apply,
@@ -787,12 +787,15 @@ def _align(a, b, w):
     ap, bp = a[k], b[k]
     ap = ap / jnp.sqrt(jnp.sum(ap * ap))
     bp = bp / jnp.sqrt(jnp.sum(bp * bp))
-    c = 1 + jnp.sum(ap * bp)
+    # q = (b x a, 1 + a.b), from s = a + b: 1 + a.b = |s|^2 / 2 and b x a = b x s, both
+    # accurate to a few eps relative even near 180 degrees, where 1 + a.b cancels.
+    sv = ap + bp
+    c = 0.5 * jnp.sum(sv * sv)
     # Antiparallel: any axis perpendicular to a serves; the coordinate axis least aligned with
     # a gives a well-conditioned cross product.
     e = jnp.eye(3, dtype=a.dtype)[jnp.argmin(jnp.abs(ap))]
-    anti = c <= 8 * eps(a.dtype)
-    vec = jnp.where(anti, cross(ap, e), cross(bp, ap))
+    anti = c < jnp.finfo(a.dtype).tiny
+    vec = jnp.where(anti, cross(ap, e), cross(bp, sv))
     q_pri = quaternion_normalize(jnp.concatenate([vec, jnp.where(anti, 0.0, c)[None]]))
     # The rotation about a_p that best aligns the secondary pairs (scipy's 2-D problem).
     cs = quaternion_apply(jnp.broadcast_to(q_pri, (n, 4)), b)

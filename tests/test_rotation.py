@@ -409,3 +409,24 @@ def test_jit_class_compiles_to_the_functions_program():
     ]
     for cls, fun in pairs:
         assert ops(jax.jit(cls), q) == ops(jax.jit(fun), q)
+
+
+def test_align_vectors_infinite_weight_near_180_degrees():
+    """The primary pair's smallest rotation is computed from ``a + b`` (no cancellation in
+    ``1 + a.b``): for exact data whose primary pair is within 1e-4 rad of antiparallel, the
+    infinite-weight answer is the true rotation to rounding."""
+    rng = np.random.default_rng(5)
+    worst = 0.0
+    for _ in range(40):
+        b0 = rng.normal(size=3)
+        b0 /= np.linalg.norm(b0)
+        # pi about an axis perpendicular to b0, then a small tilt: a0 = R b0 is nearly -b0
+        axis = np.cross(b0, rng.normal(size=3))
+        half = rotjax.rotvec_to_quaternion(np.pi * axis / np.linalg.norm(axis))
+        tilt = rotjax.rotvec_to_quaternion(1e-4 * rng.normal(size=3))
+        R = np.asarray(rotjax.quaternion_to_matrix(rotjax.quaternion_multiply(tilt, half)))
+        b = np.stack([b0, rng.normal(size=3)])
+        a = b @ R.T
+        r_inf, _ = Rotation.align_vectors(a, b, weights=[np.inf, 1.0])
+        worst = max(worst, np.abs(np.asarray(r_inf.as_matrix()) - R).max())
+    assert worst < 1e-14, worst
