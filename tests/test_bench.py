@@ -365,3 +365,21 @@ def test_accuracy_pass_every_operation(small_accuracy, op, method):
             assert np.all(np.isfinite(errs)), (op, k)
             if not k.startswith("noisy"):  # noisy matrices: Shepperd's O(sigma), by design
                 assert errs.max() <= 5.0, (op, k, errs.max())
+
+
+def test_merge_replaces_the_measured_operations_and_notes_the_run():
+    from rotjax._bench.cases import CASES
+
+    ops = list(CASES)[:3]
+    meta = {"batch": 8, "device": "cpu: cpu", "date": "d0"}
+    rows = [{"op": op, "impl": "rotjax", "v": 0} for op in ops]
+    new_meta = {"batch": 8, "device": "cpu: cpu", "date": "d1", "seconds": 1.0}
+    merged_meta, merged = R.merge(meta, rows, new_meta, [{"op": ops[1], "impl": "rotjax", "v": 1}])
+    assert [(r["op"], r["v"]) for r in merged] == [(ops[0], 0), (ops[1], 1), (ops[2], 0)]
+    assert merged_meta["rows_from_a_later_run"][-1]["ops"] == [ops[1]]
+    assert ops[1] in R.provenance(merged_meta) and "d1" in R.provenance(merged_meta)
+    # measuring the same operation again replaces the earlier note
+    again, _ = R.merge(merged_meta, merged, {**new_meta, "date": "d2"}, [{"op": ops[1], "v": 2}])
+    assert [e["date"] for e in R.later_runs(again)] == ["d2"]
+    with pytest.raises(ValueError, match="batch"):
+        R.merge(meta, rows, {**new_meta, "batch": 16}, rows)

@@ -169,8 +169,9 @@ def _meta_line(meta) -> str:
         f"{machine['cpu']}, {machine['cores']} cores, {machine['platform']}; "
         f"backend {meta['device'].split(':')[0]}, jax {meta['jax']}."
     )
-    later = meta.get("rows_from_a_later_run")
-    if later:
+    from rotjax._bench.report import later_runs
+
+    for later in later_runs(meta):
         ops = ", ".join(f"`{op}`" for op in later["ops"])
         line += f" The rows for {ops} come from a later run ({later['date'][:10]})."
     return line

@@ -62,7 +62,8 @@ def dumps(meta, rows) -> str:
     return json.dumps({"meta": meta, "rows": rows}, indent=1, allow_nan=False)
 
 
-def _later_runs(meta) -> list[dict]:
+def later_runs(meta) -> list[dict]:
+    """The notes of the runs whose rows were merged into this one (see :func:`merge`)."""
     later = meta.get("rows_from_a_later_run") or []
     return [later] if isinstance(later, dict) else list(later)
 
@@ -82,7 +83,7 @@ def merge(meta, rows, new_meta, new_rows, why=""):
     kept = [r for r in rows if r["op"] not in ops]
     order = {op: i for i, op in enumerate(CASES)}
     merged = sorted(kept + new_rows, key=lambda r: order.get(r["op"], len(order)))  # stable
-    later = [{**e, "ops": [op for op in e["ops"] if op not in ops]} for e in _later_runs(meta)]
+    later = [{**e, "ops": [op for op in e["ops"] if op not in ops]} for e in later_runs(meta)]
     later = [e for e in later if e["ops"]]
     entry = {"ops": sorted(ops, key=order.get), "date": new_meta["date"]}
     entry.update(seconds=new_meta.get("seconds"), versions=new_meta.get("versions"))
@@ -144,7 +145,7 @@ def provenance(meta) -> str:
         + ("; --quick" if meta.get("quick") else "")
         + "."
     )
-    for later in _later_runs(meta):
+    for later in later_runs(meta):
         line += f" Rows of {', '.join(later['ops'])} from a run of {later['date']}."
     return line
 
