@@ -191,15 +191,42 @@ def top_eigenpair(K):
     """``(lambda, v)``: the top eigenvector (:func:`top_eigenvector`) and its Rayleigh quotient
     ``v^T K v``, shapes ``(...,)`` and ``(..., 4)``."""
     v = top_eigenvector(K)
-    return jnp.sum(v * jnp.sum(K * v[..., None, :], axis=-1), axis=-1), v
+    return _dot(v, _mv(K, v))[..., 0], v
+
+
+# The derivative rule's small products are elementwise sums, not reductions over a trailing axis
+# of 4: XLA:CPU compiles each such reduction to a kernel of its own, a slow one in float64.
+
+
+def _sum(xs):
+    out = xs[0]
+    for x in xs[1:]:
+        out = out + x
+    return out
 
 
 def _mv(A, x):
-    return jnp.sum(A * x[..., None, :], axis=-1)
+    """``A @ x`` for ``(..., 4, 4)`` and ``(..., 4)``, as elementwise sums."""
+    n = x.shape[-1]
+    return jnp.stack([_sum([A[..., i, k] * x[..., k] for k in range(n)]) for i in range(n)], -1)
+
+
+def _mtv(A, x):
+    """``A^T @ x``, as :func:`_mv`."""
+    return _mv(jnp.swapaxes(A, -1, -2), x)
 
 
 def _dot(x, y):
-    return jnp.sum(x * y, axis=-1, keepdims=True)
+    """``x . y`` over the last axis (``keepdims``), as elementwise sums."""
+    return _sum([x[..., k] * y[..., k] for k in range(x.shape[-1])])[..., None]
+
+
+def _max4(x):
+    """Largest entry over the last axis (``keepdims``), as elementwise maxima."""
+    out = x[..., 0]
+    for k in range(1, x.shape[-1]):
+        out = jnp.maximum(out, x[..., k])
+    return out[..., None]
 
 
 @top_eigenvector.defjvp
@@ -216,20 +243,20 @@ def _top_jvp(primals, tangents):
     dK = 0.5 * (dK + jnp.swapaxes(dK, -1, -2))
     lam_all, V = jax.lax.stop_gradient(eigh4(K))
     lam, v = top_eigenpair(K)
-    top = jnp.max(lam_all, axis=-1, keepdims=True)
-    scale = jnp.max(jnp.abs(lam_all), axis=-1, keepdims=True)
+    top = _max4(lam_all)
+    scale = _max4(jnp.abs(lam_all))
     c = jnp.where(scale > 0, scale, 1.0)
     tol = TIE_ULPS * eps(K.dtype) * scale
     gap = top - lam_all
     vs = jax.lax.stop_gradient(v)
     # X's eigenvalues: 1/c along v, 1/gap_j along the others; the Jacobi column nearest v has
     # gap 0 and is replaced by v's own term.
-    own = jnp.abs(jnp.sum(V * vs[..., :, None], axis=-2))
-    is_top = own >= jnp.max(own, axis=-1, keepdims=True)
+    own = jnp.abs(_mtv(V, vs))
+    is_top = own >= _max4(own)
     inv_mu = jnp.where(is_top, 0.0, safe_div(1.0, gap, tol))
 
     def X(x):
-        return _mv(V, inv_mu * jnp.sum(V * x[..., :, None], axis=-2)) + vs * _dot(vs, x) / c
+        return _mv(V, inv_mu * _mtv(V, x)) + vs * _dot(vs, x) / c
 
     def M(x):
         return lam[..., None] * x - _mv(K, x) + c * v * _dot(v, x)
