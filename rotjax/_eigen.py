@@ -21,7 +21,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._numerics import TIE_ULPS, eps, safe_div
+from ._numerics import TIE_ULPS, eps, max_abs, safe_div
 
 # Cyclic Jacobi converges quadratically for every symmetric matrix, repeated eigenvalues
 # included (Schonhage 1964; Wilkinson 1962). The sweep counts are the fewest that bring the
@@ -194,39 +194,31 @@ def top_eigenpair(K):
     return _dot(v, _mv(K, v))[..., 0], v
 
 
-# The derivative rule's small products are elementwise sums, not reductions over a trailing axis
-# of 4: XLA:CPU compiles each such reduction to a kernel of its own, a slow one in float64.
-
-
-def _sum(xs):
-    out = xs[0]
-    for x in xs[1:]:
-        out = out + x
-    return out
+# The derivative rule's small products are sums of per-element terms, not ``jnp.sum`` over a
+# trailing axis of 4 (``_numerics.matvec``): XLA:CPU compiles each such reduction to a kernel of
+# its own, a slow one in float64.
 
 
 def _mv(A, x):
-    """``A @ x`` for ``(..., 4, 4)`` and ``(..., 4)``, as elementwise sums."""
-    n = x.shape[-1]
-    return jnp.stack([_sum([A[..., i, k] * x[..., k] for k in range(n)]) for i in range(n)], -1)
+    """``A @ x`` for ``(..., 4, 4)`` and ``(..., 4)``."""
+    return jnp.stack([sum(A[..., i, k] * x[..., k] for k in range(4)) for i in range(4)], -1)
 
 
 def _mtv(A, x):
-    """``A^T @ x``, as :func:`_mv`."""
+    """``A^T @ x``."""
     return _mv(jnp.swapaxes(A, -1, -2), x)
 
 
 def _dot(x, y):
-    """``x . y`` over the last axis (``keepdims``), as elementwise sums."""
-    return _sum([x[..., k] * y[..., k] for k in range(x.shape[-1])])[..., None]
+    """``x . y`` over the last axis of 4 (``keepdims``)."""
+    return sum(x[..., k] * y[..., k] for k in range(4))[..., None]
 
 
-def _max4(x):
-    """Largest entry over the last axis (``keepdims``), as elementwise maxima."""
-    out = x[..., 0]
-    for k in range(1, x.shape[-1]):
-        out = jnp.maximum(out, x[..., k])
-    return out[..., None]
+def _max(x):
+    """Largest entry over the last axis of 4 (``keepdims``)."""
+    return jnp.maximum(jnp.maximum(x[..., 0], x[..., 1]), jnp.maximum(x[..., 2], x[..., 3]))[
+        ..., None
+    ]
 
 
 @top_eigenvector.defjvp
@@ -243,8 +235,8 @@ def _top_jvp(primals, tangents):
     dK = 0.5 * (dK + jnp.swapaxes(dK, -1, -2))
     lam_all, V = jax.lax.stop_gradient(eigh4(K))
     lam, v = top_eigenpair(K)
-    top = _max4(lam_all)
-    scale = _max4(jnp.abs(lam_all))
+    top = _max(lam_all)
+    scale = max_abs(*jnp.moveaxis(lam_all, -1, 0))[..., None]
     c = jnp.where(scale > 0, scale, 1.0)
     tol = TIE_ULPS * eps(K.dtype) * scale
     gap = top - lam_all
@@ -252,7 +244,7 @@ def _top_jvp(primals, tangents):
     # X's eigenvalues: 1/c along v, 1/gap_j along the others; the Jacobi column nearest v has
     # gap 0 and is replaced by v's own term.
     own = jnp.abs(_mtv(V, vs))
-    is_top = own >= _max4(own)
+    is_top = own >= _max(own)
     inv_mu = jnp.where(is_top, 0.0, safe_div(1.0, gap, tol))
 
     def X(x):
