@@ -5,12 +5,16 @@ matrix (Bar-Itzhack 2000), Wahba's problem (Davenport's q-method) and the quater
 (Markley et al. 2007) each reduce to the eigenvector of the largest eigenvalue of a symmetric
 4x4 matrix.
 
-* Forward: a fixed number of cyclic Jacobi sweeps (Golub & Van Loan, Alg. 8.5.3, symmetric
-  Schur rotations), written as per-matrix scalar expressions so that XLA fuses the whole
-  kernel into one loop over the batch; then one power step with ``K - lambda_min I``, which
-  scales the remaining error along each other eigenvector by
-  ``(lambda_j - lambda_min) / (lambda_top - lambda_min) <= 1``. The matrix is first scaled by an
-  exact power of two, so the result does not depend on the input's scale.
+* Every symmetric ``K`` is Davenport's ``K(B)`` of a 3x3 ``B`` (a linear bijection onto the
+  traceless part; see :func:`_k_to_b`) plus a multiple of ``I``, and the top eigenvector of
+  ``K(B)`` is the quaternion of ``Q = U diag(1, 1, det(U V^T)) V^T`` for the SVD
+  ``B = U S V^T``: the rotation that maximises ``tr(Q^T B)``. Its other eigenvectors are
+  ``q (x) (v_j, 0)`` (``Q`` composed with a half turn about a right singular vector).
+* Forward: one-sided (Hestenes) Jacobi on the 3x3 ``B``, a fixed number of sweeps, then ``Q``
+  from the two largest columns of ``B V`` and their cross product (no division by the smallest
+  singular value; ``det B < 0`` and rank-deficient ``B`` included), and Shepperd's extraction.
+  ``B`` is first scaled by an exact power of two, so the result does not depend on its scale.
+  On the CPU the batch runs in cache-sized chunks (every intermediate stays in cache).
 * Derivative: ``dv = (lambda_top I - K)^+ dK v``, written as a differentiable expression of
   ``K`` (see :func:`_top_jvp`), so second derivatives are exact where the top eigenvalue is
   simple, including at ties among the lower ones (exact rotations, identical means).
@@ -18,119 +22,191 @@ matrix (Bar-Itzhack 2000), Wahba's problem (Davenport's q-method) and the quater
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 
 from ._numerics import TIE_ULPS, eps, max_abs, safe_div
 
-# Cyclic Jacobi converges quadratically for every symmetric matrix, repeated eigenvalues
-# included (Schonhage 1964; Wilkinson 1962). The sweep counts are the fewest that bring the
-# off-diagonal entries to the rounding level (a few eps of the largest entry) over random
-# Gaussian matrices, near-ties down to relative gaps of 1e-9, +-1 pairs, graded spectra and
-# near-rotations; one sweep fewer leaves 1e3-1e4 eps in each dtype.
-_SWEEPS = {jnp.dtype(jnp.float32): 4, jnp.dtype(jnp.float64): 5}
-_PAIRS = ((0, 1), (2, 3), (0, 2), (1, 3), (0, 3), (1, 2))
+# One-sided Jacobi converges quadratically (Hestenes 1958; Demmel & Veselic 1992). The sweep
+# counts are the fewest that orthogonalise the columns to the rounding level over random
+# Gaussian matrices, near-ties, det < 0, rank-deficient and near-rotation inputs; one sweep
+# fewer leaves errors of 1e3-1e7 eps in float64.
+_SWEEPS = {jnp.dtype(jnp.float32): 3, jnp.dtype(jnp.float64): 4}
+_PAIRS = ((0, 1), (0, 2), (1, 2))
+# Batch elements per chunk on the CPU: the Jacobi state of a chunk fits in a core's L2 cache.
+_CHUNK = 2**14
+
+
+def _pow2_factor(x, axes):
+    """The exact power of two ``2^-e`` (as two factors, since ``2^-e`` alone overflows for
+    subnormal maxima) that brings the largest ``|entry|`` over ``axes`` into ``[1/2, 1)``, and
+    whether that maximum is finite. 1 where the maximum is zero or not finite."""
+    m = jnp.max(jnp.abs(x), axis=axes, keepdims=True)
+    _, e = jnp.frexp(jnp.where(jnp.isfinite(m) & (m > 0), m, 1.0))
+    h = e // 2
+    one = jnp.ones((), x.dtype)
+    return jnp.ldexp(one, -h), jnp.ldexp(one, h - e), jnp.isfinite(m)
 
 
 def pow2_scale(x, axes):
     """``x`` times an exact power of two per batch element, so that the largest ``|entry|`` over
     ``axes`` lies in ``[1/2, 1)``; no rounding. Zero stays zero; a non-finite entry gives NaN
     over the whole element."""
-    m = jnp.max(jnp.abs(x), axis=axes, keepdims=True)
-    finite = jnp.isfinite(m) & (m > 0)
-    _, e = jnp.frexp(jnp.where(finite, m, 1.0))
-    # Two factors: 2^-e alone overflows for subnormal m.
-    h = e // 2
-    one = jnp.ones((), x.dtype)
-    y = x * jnp.ldexp(one, -h) * jnp.ldexp(one, h - e)
-    return jnp.where(jnp.isfinite(m), y, jnp.nan)
-
-
-def _mul(a, b):
-    """``a * b`` where either may be a Python ``0.0`` or ``1.0`` (the initial eigenvectors): those
-    are folded in Python so the first sweep does not multiply by constants."""
-    if isinstance(a, float) or isinstance(b, float):
-        if isinstance(b, float):
-            a, b = b, a
-        return 0.0 if a == 0.0 else b
-    return a * b
-
-
-def _lin(c, x, s, y):
-    """``c x + s y`` with :func:`_mul`'s constant folding."""
-    u, w = _mul(c, x), _mul(s, y)
-    if isinstance(u, float):
-        return w
-    if isinstance(w, float):
-        return u
-    return u + w
+    f1, f2, finite = _pow2_factor(x, axes)
+    return jnp.where(finite, x * f1 * f2, jnp.nan)
 
 
 def _rotation(app, aqq, apq):
-    """``(t, c, s)`` of the Jacobi rotation that zeroes ``a_pq``: ``t = tan(theta)`` the smaller
-    root of ``t^2 + 2 tau t - 1 = 0``, ``tau = (a_qq - a_pp) / (2 a_pq)`` (Golub & Van Loan
-    8.5.2), written as ``t = 2 a_pq / (d + sign(d) sqrt(d^2 + 4 a_pq^2))``, ``d = a_qq - a_pp``,
-    which needs no division by ``a_pq``. Both zero (underflowed squares included): ``t = 0``."""
+    """``(c, s)`` of the Jacobi rotation that zeroes ``a_pq`` of the symmetric 2x2
+    ``[[a_pp, a_pq], [a_pq, a_qq]]``: ``t = tan(theta)`` the smaller root of
+    ``t^2 + 2 tau t - 1 = 0``, ``tau = (a_qq - a_pp) / (2 a_pq)`` (Golub & Van Loan 8.5.2),
+    written as ``t = 2 a_pq / (d + sign(d) sqrt(d^2 + 4 a_pq^2))``, ``d = a_qq - a_pp``, which
+    needs no division by ``a_pq``. Both zero (underflowed squares included): ``t = 0``.
+    ``c = sqrt(1 / (1 + t^2))``: XLA:CPU compiles ``rsqrt`` to a slow loop of its own."""
     d = aqq - app
     r = jnp.sqrt(d * d + 4.0 * apq * apq)
     den = jnp.where(d < 0, d - r, d + r)
     zero = den == 0
     t = jnp.where(zero, 0.0, 2.0 * apq / jnp.where(zero, 1.0, den))  # double where
-    c = jax.lax.rsqrt(1.0 + t * t)
-    return t, c, t * c
+    c = jnp.sqrt(1.0 / (1.0 + t * t))
+    return c, t * c
 
 
-def _jacobi(a, sweeps):
-    """Cyclic Jacobi on the symmetric 4x4 given as a dict ``{(i, j): array}`` (``i <= j``).
+def _dot3(x, y):
+    return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
 
-    Returns the diagonal (eigenvalues, unordered) and the eigenvector columns ``V[j][i]``
-    (component ``i`` of eigenvector ``j``), as per-matrix arrays.
+
+def _cross3(x, y):
+    return [x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]]
+
+
+def _unit_or(w, fallback):
+    """``w / |w|``, or ``fallback`` where ``|w| = 0``."""
+    n = _dot3(w, w)
+    ok = n > 0
+    inv = jnp.sqrt(1.0 / jnp.where(ok, n, 1.0))
+    return [jnp.where(ok, x * inv, f) for x, f in zip(w, fallback, strict=True)]
+
+
+def _perpendicular(u):
+    """A unit vector perpendicular to the unit ``u``: ``u x e_k`` normalised, ``e_k`` the axis
+    of ``u``'s smallest component (so ``|u x e_k|^2 >= 2/3``)."""
+    k = jnp.argmin(jnp.abs(jnp.stack(u, axis=-1)), axis=-1)  # one evaluation: see _polar
+    k0, k1 = k == 0, k == 1
+    zero = jnp.zeros_like(u[0])
+    p = [
+        jnp.where(k0, zero, jnp.where(k1, -u[2], u[1])),
+        jnp.where(k0, u[2], jnp.where(k1, zero, -u[0])),
+        jnp.where(k0, -u[1], jnp.where(k1, u[0], zero)),
+    ]
+    inv = jnp.sqrt(1.0 / _dot3(p, p))
+    return [x * inv for x in p]
+
+
+def _pick(masks, cols):
+    """Columns ``(a, b)``: the two of ``cols`` other than the one ``masks`` marks smallest."""
+    m0, m1 = masks
+
+    def sel(i0, i1, i2):
+        return [
+            jnp.where(m0, x, jnp.where(m1, y, z))
+            for x, y, z in zip(*(cols[i] for i in (i0, i1, i2)), strict=True)
+        ]
+
+    return sel(1, 0, 0), sel(2, 2, 1)
+
+
+def _polar(B, with_v):
+    """Scalar-last unit quaternion of the rotation maximising ``tr(Q^T B)`` for ``(..., 3, 3)``
+    ``B`` (``w >= 0``), and with ``with_v`` the right singular vectors ``(..., 3, 3)`` (columns).
+
+    One-sided Jacobi: the columns of ``W = B V`` are rotated in pairs until orthogonal, the
+    rotations accumulated in ``V``; both are rows of one ``(..., 6, 3)`` state, so each rotation
+    is one loop over it. Then ``Q = u_a v_a^T + u_b v_b^T + (u_a x u_b)(v_a x v_b)^T`` from the
+    two largest columns ``u = w / |w|`` (a rotation, whatever the sign of ``det B``).
     """
-    a = dict(a)
-    V = [[1.0 if i == j else 0.0 for i in range(4)] for j in range(4)]
+    from ._matrix import _shepperd  # _matrix imports this module
 
-    def get(i, j):
-        return a[(min(i, j), max(i, j))]
-
-    def put(i, j, x):
-        a[(min(i, j), max(i, j))] = x
-
-    for _ in range(sweeps):
+    Bs = pow2_scale(B, (-2, -1))
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), Bs.shape)
+    S = jnp.concatenate([Bs, eye], axis=-2)
+    for _ in range(_SWEEPS[jnp.dtype(B.dtype)]):
         for p, q in _PAIRS:
-            t, c, s = _rotation(a[(p, p)], a[(q, q)], a[(p, q)])
-            apq = a[(p, q)]
-            a[(p, p)] = a[(p, p)] - t * apq
-            a[(q, q)] = a[(q, q)] + t * apq
-            a[(p, q)] = jnp.zeros_like(apq)
-            for r in range(4):
-                if r in (p, q):
-                    continue
-                arp, arq = get(r, p), get(r, q)
-                put(r, p, c * arp - s * arq)
-                put(r, q, s * arp + c * arq)
-            vp, vq = V[p], V[q]
-            V[p] = [_lin(c, x, -s, y) for x, y in zip(vp, vq, strict=True)]
-            V[q] = [_lin(s, x, c, y) for x, y in zip(vp, vq, strict=True)]
-    lam = [a[(i, i)] for i in range(4)]
-    return lam, V
+            cols = [S[..., k] for k in range(3)]
+            wp, wq = cols[p][..., :3], cols[q][..., :3]
+            alpha, beta, gamma = (
+                sum(x[..., i] * y[..., i] for i in range(3))
+                for x, y in ((wp, wp), (wq, wq), (wp, wq))
+            )
+            c, s = (x[..., None] for x in _rotation(alpha, beta, gamma))
+            cols[p], cols[q] = c * cols[p] - s * cols[q], s * cols[p] + c * cols[q]
+            S = jnp.stack(cols, axis=-1)
+    W = [[S[..., i, j] for i in range(3)] for j in range(3)]
+    V = [[S[..., 3 + i, j] for i in range(3)] for j in range(3)]
+    n = [_dot3(w, w) for w in W]
+    # The smallest column as an integer from one reduction: a comparison of the norms
+    # themselves could be evaluated in two loops with different roundings of near-equal norms
+    # (XLA recomputes cheap values per loop) and pair u_a with another v_a.
+    k = jnp.argmin(jnp.stack(n, axis=-1), axis=-1)
+    masks = (k == 0, k == 1)
+    (wa, wb), (va, vb) = _pick(masks, W), _pick(masks, V)
+    ua = _unit_or(wa, va)  # B = 0: any rotation
+    ub = _unit_or(wb, _perpendicular(ua))  # rank 1: any rotation taking v_a to u_a
+    uc, vc = _cross3(ua, ub), _cross3(va, vb)
+    Q = jnp.stack(
+        [
+            jnp.stack([ua[i] * va[j] + ub[i] * vb[j] + uc[i] * vc[j] for j in range(3)], -1)
+            for i in range(3)
+        ],
+        -2,
+    )
+    q = _shepperd(Q)
+    if not with_v:
+        return q
+    return q, jnp.stack([jnp.stack(v, -1) for v in V], -1)
 
 
-def _entries(K):
-    return {(i, j): K[..., i, j] for i in range(4) for j in range(i, 4)}
+def _by_chunks(fn, B):
+    """``fn`` over the ``(..., 3, 3)`` batch ``B``; on the CPU in chunks of ``_CHUNK`` (padded
+    with identities), elsewhere in one piece."""
+    batch = B.shape[:-2]
+    n = math.prod(batch)
+    if n <= _CHUNK:
+        return fn(B)
+
+    def chunked(B):
+        flat = B.reshape(n, 3, 3)
+        pad = -n % _CHUNK
+        if pad:
+            flat = jnp.concatenate([flat, jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), (pad, 3, 3))])
+        out = jax.lax.map(fn, flat.reshape(-1, _CHUNK, 3, 3))
+        return jax.tree.map(
+            lambda o: o.reshape(-1, *o.shape[2:])[:n].reshape(*batch, *o.shape[2:]), out
+        )
+
+    return jax.lax.platform_dependent(B, cpu=chunked, default=fn)
 
 
-def _argmax_select(lam, vals):
-    """``vals[k]`` for the first ``k`` with the largest ``lam[k]`` (nested ``where``)."""
-    l0, l1, l2, l3 = lam
-    m0 = (l0 >= l1) & (l0 >= l2) & (l0 >= l3)
-    m1 = (l1 >= l2) & (l1 >= l3)
-    m2 = l2 >= l3
-    out = []
-    for i in range(len(vals[0])):
-        x = jnp.where(m2, vals[2][i], vals[3][i])
-        x = jnp.where(m1, vals[1][i], x)
-        out.append(jnp.where(m0, vals[0][i], x))
-    return out
+def _k_to_b(K):
+    """The ``(..., 3, 3)`` ``B`` with ``davenport_k(B) = K - (tr K / 4) I`` for the symmetric
+    part of ``(..., 4, 4)`` ``K`` (the inverse of :func:`davenport_k` on traceless matrices)."""
+
+    def k(i, j):
+        return 0.5 * K[..., i, j] + 0.5 * K[..., j, i]
+
+    t = 0.25 * (K[..., 0, 0] + K[..., 1, 1]) + 0.25 * (K[..., 2, 2] + K[..., 3, 3])
+    diag = [0.5 * K[..., i, i] + 0.5 * K[..., 3, 3] - t for i in range(3)]
+    # davenport_k: K[i, j] = b_ij + b_ji (i, j < 3), K[:3, 3] = (b21 - b12, b02 - b20, b10 - b01)
+    s01, s02, s12 = 0.5 * k(0, 1), 0.5 * k(0, 2), 0.5 * k(1, 2)
+    a21, a02, a10 = 0.5 * k(0, 3), 0.5 * k(1, 3), 0.5 * k(2, 3)
+    rows = (
+        (diag[0], s01 - a10, s02 + a02),
+        (s01 + a10, diag[1], s12 - a21),
+        (s02 - a02, s12 + a21, diag[2]),
+    )
+    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 def _check(K):
@@ -138,53 +214,74 @@ def _check(K):
         raise ValueError(f"K: expected shape (..., 4, 4), got {tuple(K.shape)}")
 
 
-def eigh4(K):
-    """Eigenvalues ``(..., 4)`` (unordered) and eigenvectors ``(..., 4, 4)`` (columns) of the
-    symmetric ``K``, read from its upper triangle, by Jacobi sweeps on ``K`` scaled by a power
-    of two (the eigenvalues are scaled back). A non-finite entry gives NaN. No derivative rule:
-    see :func:`top_eigenvector`."""
-    _check(K)
-    Ks = pow2_scale(K, (-2, -1))
-    lam, V = _jacobi(_entries(Ks), _SWEEPS[jnp.dtype(K.dtype)])
-    # Scale back: the ratio K / Ks, exact, from one nonzero entry's exponent.
-    m = jnp.max(jnp.abs(K), axis=(-2, -1))
-    ms = jnp.max(jnp.abs(Ks), axis=(-2, -1))
-    ratio = jnp.where(ms > 0, m / jnp.where(ms > 0, ms, 1.0), 0.0)
-    return jnp.stack(lam, axis=-1) * ratio[..., None], jnp.stack(
-        [jnp.stack(v, axis=-1) for v in V], axis=-1
+def _half_turns(q, V):
+    """Eigenvectors ``(..., 4, 4)`` (columns) of ``K(B)`` from its top one ``q`` and the right
+    singular vectors ``V`` of ``B``: ``q`` and ``q (x) (v_j, 0)``, ``j = 0, 1, 2``."""
+    x, y, z, w = (q[..., i] for i in range(4))
+    cols = [q]
+    for j in range(3):
+        a, b, c = (V[..., i, j] for i in range(3))
+        cols.append(
+            jnp.stack(
+                [
+                    w * a + y * c - z * b,
+                    w * b + z * a - x * c,
+                    w * c + x * b - y * a,
+                    -(x * a + y * b + z * c),
+                ],
+                axis=-1,
+            )
+        )
+    return jnp.stack(cols, axis=-1)
+
+
+def _rayleigh(K, E):
+    """``e_j^T K e_j`` for each column ``e_j`` of ``E``, shape ``(..., 4)``."""
+    return sum(
+        E[..., i, :] * sum(K[..., i, k, None] * E[..., k, :] for k in range(4)) for i in range(4)
     )
 
 
-def _top_forward(K):
-    """Unit top eigenvector (components), the scaled ``K``'s entries and its eigenvalues."""
-    Ks = pow2_scale(K, (-2, -1))
-    a = _entries(Ks)
-    lam, V = _jacobi(a, _SWEEPS[jnp.dtype(K.dtype)])
-    v = _argmax_select(lam, V)
-    # One power step with K - lambda_min I (all its eigenvalues >= 0, the top one the largest).
-    lmin = jnp.minimum(jnp.minimum(lam[0], lam[1]), jnp.minimum(lam[2], lam[3]))
-    w = [sum(a[(min(i, j), max(i, j))] * v[j] for j in range(4)) - lmin * v[i] for i in range(4)]
-    sq = sum(x * x for x in w)
-    ok = sq > 0  # 0 only where K is a multiple of I: keep the Jacobi vector
-    inv = jax.lax.rsqrt(jnp.where(ok, sq, 1.0))
-    return [jnp.where(ok, x * inv, y) for x, y in zip(w, v, strict=True)]
+def eigh4(K):
+    """Eigenvalues ``(..., 4)`` (unordered; the first the largest) and eigenvectors
+    ``(..., 4, 4)`` (columns) of the symmetric part of ``K``, from the kernel's SVD of the
+    equivalent 3x3 matrix; the eigenvalues are the Rayleigh quotients. A non-finite entry gives
+    NaN. No derivative rule: see :func:`top_eigenvector`."""
+    _check(K)
+    q, V = _by_chunks(lambda B: _polar(B, True), _k_to_b(K))
+    E = _half_turns(q, V)
+    Ks = 0.5 * (K + jnp.swapaxes(K, -1, -2))
+    return _rayleigh(Ks, E), E
 
 
 @jax.custom_jvp
+def _top(B, q, V):
+    """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller (with ``V``, the
+    right singular vectors of ``B``), differentiated as that function of ``B``."""
+    del B, V
+    return q
+
+
+def _nearest(B):
+    """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`)."""
+    q, V = jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, True), B))
+    return _top(B, q, V)
+
+
 def top_eigenvector(K):
-    """Unit eigenvector ``(..., 4)`` of the largest eigenvalue of a symmetric ``(..., 4, 4)``
-    ``K`` (its upper triangle is read; the derivative symmetrises ``dK``).
+    """Unit eigenvector ``(..., 4)`` of the largest eigenvalue of the symmetric part of a
+    ``(..., 4, 4)`` ``K``.
 
     The sign is arbitrary. Where the top eigenvalue is simple the result is accurate to a few
     eps divided by the relative gap to the next one, at any finite scale of ``K``; a non-finite
-    entry gives NaN; the zero matrix gives a unit vector (every vector is an eigenvector).
+    entry gives NaN; a multiple of ``I`` gives a unit vector (every vector is an eigenvector).
 
     Derivative: exact while the top eigenvalue is simple, and differentiable again (second
     derivatives exact there). At a tie with the top eigenvalue the component of the derivative
     along the tied eigenspace, where the answer is not unique, is 0.
     """
     _check(K)
-    return jnp.stack(_top_forward(K), axis=-1)
+    return _nearest(_k_to_b(K))
 
 
 def top_eigenpair(K):
@@ -221,34 +318,33 @@ def _max(x):
     ]
 
 
-@top_eigenvector.defjvp
+@_top.defjvp
 def _top_jvp(primals, tangents):
     # dv = (lambda I - K)^+ dK v = M^{-1} (I - v v^T) dK v, with M = lambda I - K + c v v^T
     # (invertible where lambda is simple; M^{-1} v = v / c, so the v v^T term cancels).
-    # M^{-1} is evaluated as 2 X - X M X with X = M^{-1} from the eigendecomposition under
-    # stop_gradient: the same value, and its derivative in K is that of M^{-1}. With v and
-    # lambda = v^T K v themselves differentiable (this rule, recursively), the expression is an
-    # exact identity in K, so its derivative is the second derivative of v. Its only gap
-    # terms are to the top eigenvalue: lower ties (exact rotations, identical inputs to a mean)
-    # do not appear. A gap to the top below TIE_ULPS eps |K| is a tie: X is 0 there.
-    (K,), (dK,) = primals, tangents
-    dK = 0.5 * (dK + jnp.swapaxes(dK, -1, -2))
-    lam_all, V = jax.lax.stop_gradient(eigh4(K))
-    lam, v = top_eigenpair(K)
-    top = _max(lam_all)
+    # M^{-1} is evaluated as 2 X - X M X with X = M^{-1} from the eigendecomposition (constant):
+    # the same value, and its derivative in K is that of M^{-1}. With v and lambda = v^T K v
+    # themselves differentiable (this rule, recursively), the expression is an exact identity
+    # in K, so its derivative is the second derivative of v. Its only gap terms are to the top
+    # eigenvalue: lower ties (exact rotations, identical inputs to a mean) do not appear. A gap
+    # to the top below TIE_ULPS eps |K| is a tie: X is 0 there. K = davenport_k(B) scaled by an
+    # exact power of two (v does not depend on the scale).
+    (B, q, V), (dB, _, _) = primals, tangents
+    f1, f2, _ = jax.lax.stop_gradient(_pow2_factor(B, (-2, -1)))
+    K, dK = davenport_k(B * f1 * f2), davenport_k(dB * f1 * f2)
+    E = _half_turns(q, V)
+    lam_all = jax.lax.stop_gradient(_rayleigh(K, E))
+    v = _top(B, q, V)
+    lam = _dot(v, _mv(K, v))[..., 0]
+    top = lam_all[..., :1]
     scale = max_abs(*jnp.moveaxis(lam_all, -1, 0))[..., None]
     c = jnp.where(scale > 0, scale, 1.0)
     tol = TIE_ULPS * eps(K.dtype) * scale
-    gap = top - lam_all
-    vs = jax.lax.stop_gradient(v)
-    # X's eigenvalues: 1/c along v, 1/gap_j along the others; the Jacobi column nearest v has
-    # gap 0 and is replaced by v's own term.
-    own = jnp.abs(_mtv(V, vs))
-    is_top = own >= _max(own)
-    inv_mu = jnp.where(is_top, 0.0, safe_div(1.0, gap, tol))
+    # X's eigenvalues: 1/c along v (column 0 of E), 1/gap_j along the others.
+    inv_mu = jnp.concatenate([jnp.zeros_like(top), safe_div(1.0, top - lam_all[..., 1:], tol)], -1)
 
     def X(x):
-        return _mv(V, inv_mu * _mtv(V, x)) + vs * _dot(vs, x) / c
+        return _mv(E, inv_mu * _mtv(E, x)) + q * _dot(q, x) / c
 
     def M(x):
         return lam[..., None] * x - _mv(K, x) + c * v * _dot(v, x)
@@ -256,7 +352,7 @@ def _top_jvp(primals, tangents):
     Kv = _mv(dK, v)
     w = Kv - v * _dot(v, Kv)
     y = X(w)
-    return v, 2.0 * y - X(M(y))
+    return v, 2.0 * y - X(M(y))  # v, not the constant q: its derivative is the next order's
 
 
 def davenport_k(B):
@@ -285,6 +381,6 @@ def nearest_quaternion(B):
     """Scalar-last unit quaternion ``(..., 4)`` (sign arbitrary) of the rotation ``R`` maximising
     ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B``: the nearest rotation to ``B``, ``det B < 0``
     included. NaN where ``B`` is zero or not finite. Independent of the scale of ``B``."""
-    v = top_eigenvector(davenport_k(pow2_scale(B, (-2, -1))))
+    v = _nearest(B)
     zero = jnp.all(B == 0, axis=(-2, -1))[..., None]
     return jnp.where(zero, jnp.nan, v)
