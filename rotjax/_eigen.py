@@ -58,13 +58,27 @@ def pow2_scale(x, axes):
     return jnp.where(finite, x * f1 * f2, jnp.nan)
 
 
+def _pow2_scale_3x3(B):
+    """:func:`pow2_scale` of each ``(..., 3, 3)`` matrix, its maximum taken elementwise
+    (:func:`max_abs`): XLA:CPU compiles ``jnp.max`` over the small axes to a slow loop."""
+    m = max_abs(*(B[..., i, j] for i in range(3) for j in range(3)))[..., None, None]
+    _, e = jnp.frexp(jnp.where(jnp.isfinite(m) & (m > 0), m, 1.0))
+    h = e // 2
+    one = jnp.ones((), B.dtype)
+    return jnp.where(jnp.isfinite(m), B * jnp.ldexp(one, -h) * jnp.ldexp(one, h - e), jnp.nan)
+
+
 def _rotation(app, aqq, apq):
     """``(c, s)`` of the Jacobi rotation that zeroes ``a_pq`` of the symmetric 2x2
     ``[[a_pp, a_pq], [a_pq, a_qq]]``: ``t = tan(theta)`` the smaller root of
     ``t^2 + 2 tau t - 1 = 0``, ``tau = (a_qq - a_pp) / (2 a_pq)`` (Golub & Van Loan 8.5.2),
     written as ``t = 2 a_pq / (d + sign(d) sqrt(d^2 + 4 a_pq^2))``, ``d = a_qq - a_pp``, which
     needs no division by ``a_pq``. Both zero (underflowed squares included): ``t = 0``.
-    ``c = sqrt(1 / (1 + t^2))``: XLA:CPU compiles ``rsqrt`` to a slow loop of its own."""
+
+    ``c`` and ``s`` come from the one quotient ``t``: XLA recomputes cheap expressions in each
+    loop that uses them, and a sign of ``d`` taken twice at ``d ~ 0`` (an exact rotation) could
+    differ between the loops that update the two columns. ``c = sqrt(1 / (1 + t^2))``, as
+    XLA:CPU compiles ``rsqrt`` to a slow loop."""
     d = aqq - app
     r = jnp.sqrt(d * d + 4.0 * apq * apq)
     den = jnp.where(d < 0, d - r, d + r)
@@ -127,9 +141,9 @@ def _polar(B, with_v):
     is one loop over it. Then ``Q = u_a v_a^T + u_b v_b^T + (u_a x u_b)(v_a x v_b)^T`` from the
     two largest columns ``u = w / |w|`` (a rotation, whatever the sign of ``det B``).
     """
-    from ._matrix import _shepperd  # _matrix imports this module
+    from ._matrix import _k4_columns  # _matrix imports this module
 
-    Bs = pow2_scale(B, (-2, -1))
+    Bs = _pow2_scale_3x3(B)
     eye = jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), Bs.shape)
     S = jnp.concatenate([Bs, eye], axis=-2)
     for _ in range(_SWEEPS[jnp.dtype(B.dtype)]):
@@ -162,7 +176,15 @@ def _polar(B, with_v):
         ],
         -2,
     )
-    q = _shepperd(Q)
+    # Shepperd's extraction: the column of K = 4 q q^T with the largest diagonal, normalised
+    # (an argmax again, for one choice across the four components).
+    cols, diag = _k4_columns(Q)
+    k = jnp.argmax(jnp.stack(diag, axis=-1), axis=-1)
+    c = [
+        jnp.where(k == 0, x, jnp.where(k == 1, y, jnp.where(k == 2, z, w)))
+        for x, y, z, w in zip(*cols, strict=True)
+    ]
+    q = jnp.stack(c, axis=-1) * jnp.sqrt(1.0 / sum(x * x for x in c))[..., None]
     if not with_v:
         return q
     return q, jnp.stack([jnp.stack(v, -1) for v in V], -1)
@@ -255,17 +277,16 @@ def eigh4(K):
 
 
 @jax.custom_jvp
-def _top(B, q, V):
-    """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller (with ``V``, the
-    right singular vectors of ``B``), differentiated as that function of ``B``."""
-    del B, V
+def _top(B, q):
+    """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller, differentiated
+    as that function of ``B``."""
+    del B
     return q
 
 
 def _nearest(B):
     """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`)."""
-    q, V = jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, True), B))
-    return _top(B, q, V)
+    return _top(B, jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, False), B)))
 
 
 def top_eigenvector(K):
@@ -329,12 +350,13 @@ def _top_jvp(primals, tangents):
     # eigenvalue: lower ties (exact rotations, identical inputs to a mean) do not appear. A gap
     # to the top below TIE_ULPS eps |K| is a tie: X is 0 there. K = davenport_k(B) scaled by an
     # exact power of two (v does not depend on the scale).
-    (B, q, V), (dB, _, _) = primals, tangents
+    (B, q), (dB, _) = primals, tangents
     f1, f2, _ = jax.lax.stop_gradient(_pow2_factor(B, (-2, -1)))
     K, dK = davenport_k(B * f1 * f2), davenport_k(dB * f1 * f2)
-    E = _half_turns(q, V)
+    qe, V = jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, True), B))
+    E = _half_turns(qe, V)
     lam_all = jax.lax.stop_gradient(_rayleigh(K, E))
-    v = _top(B, q, V)
+    v = _top(B, q)
     lam = _dot(v, _mv(K, v))[..., 0]
     top = lam_all[..., :1]
     scale = max_abs(*jnp.moveaxis(lam_all, -1, 0))[..., None]
@@ -344,7 +366,7 @@ def _top_jvp(primals, tangents):
     inv_mu = jnp.concatenate([jnp.zeros_like(top), safe_div(1.0, top - lam_all[..., 1:], tol)], -1)
 
     def X(x):
-        return _mv(E, inv_mu * _mtv(E, x)) + q * _dot(q, x) / c
+        return _mv(E, inv_mu * _mtv(E, x)) + qe * _dot(qe, x) / c
 
     def M(x):
         return lam[..., None] * x - _mv(K, x) + c * v * _dot(v, x)
