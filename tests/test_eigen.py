@@ -116,3 +116,81 @@ def test_mean_and_align_hessians_finite():
     check_grads(lambda q: rj.quaternion_mean(q), (q,), order=2, modes=["fwd", "rev"])
     a = jnp.eye(3)
     assert np.isfinite(jax.hessian(lambda a: rj.align_vectors(a, jnp.eye(3)))(a)).all()
+
+
+def _spectral(lam, seed, n=12):
+    rng = np.random.default_rng(seed)
+    Q, _ = np.linalg.qr(rng.standard_normal((n, 4, 4)))
+    return np.einsum("nij,j,nkj->nik", Q, np.asarray(lam, np.float64), Q)
+
+
+def _from_b(B):
+    from rotjax._eigen import davenport_k
+
+    return np.asarray(davenport_k(jnp.asarray(B)))
+
+
+_RNG = np.random.default_rng(21)
+_R = Rotation.random(12, random_state=21).as_matrix()
+# Inputs where the top eigenvalue ties or nearly ties, or where B is rank deficient: the
+# answer is any vector of the (near-)tied space, so the test is the residual, not the vector.
+TIES = {
+    "triple near-tie (B ~ -R)": _from_b(-_R + 1e-7 * _RNG.standard_normal((12, 3, 3))),
+    "exact triple tie (B = -I)": _from_b(-np.broadcast_to(np.eye(3), (12, 3, 3))),
+    "rank 1": _from_b(np.einsum("ni,nj->nij", *_RNG.standard_normal((2, 12, 3)))),
+    "rank 2": _from_b(_R * np.array([1.0, 0.5, 0.0])),
+    "graded": _from_b(np.einsum("nij,j,nkj->nik", _R, [1.0, 1e-6, 1e-12], _R[::-1])),
+    "double tie": _spectral([2.0, 2.0, 0.5, -1.0], 22),
+    "near-tie 1e-12": _spectral([1.0 + 1e-12, 1.0, 0.3, -0.5], 23),
+    "multiple of I": np.broadcast_to(3.0 * np.eye(4), (12, 4, 4)).copy(),
+    "zero": np.zeros((12, 4, 4)),
+}
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("name", list(CASES) + list(TIES))
+def test_top_eigenvector_residual(name, dtype):
+    """A unit vector with residual |K v - (v.K v) v| within a few eps |K|, and a Rayleigh
+    quotient within a few eps |K| of the top eigenvalue: backward stable, ties included."""
+    K = {**CASES, **TIES}[name].astype(dtype)
+    v = np.asarray(_top(jnp.asarray(K)), np.float64)
+    K = K.astype(np.float64)
+    e = np.finfo(dtype).eps
+    norm = np.maximum(np.abs(K).max(axis=(-2, -1)), np.finfo(np.float64).tiny)
+    assert np.allclose(np.linalg.norm(v, axis=-1), 1.0, atol=4 * e)
+    Kv = np.einsum("nij,nj->ni", K, v)
+    rho = np.einsum("ni,ni->n", v, Kv)
+    assert (np.linalg.norm(Kv - rho[:, None] * v, axis=-1) <= 16 * e * norm).all(), name
+    assert (np.linalg.eigvalsh(K)[:, -1] - rho <= 16 * e * norm).all(), name
+
+
+def test_exact_rotations_under_jit():
+    """Exact rotations tie every singular value of B: the kernel's choices (which column is
+    smallest, which column of K is largest) must agree across the loops XLA compiles."""
+    Q = Rotation.random(512, random_state=31).as_quat()
+    Q[:4] = [[0, 0, 0, 1], [1, 0, 0, 0], [0, 1, 0, 0], [1 / np.sqrt(2), 1 / np.sqrt(2), 0, 0]]
+    R = Rotation.from_quat(Q).as_matrix()
+    for dtype in (np.float32, np.float64):
+        q = jax.jit(lambda R: rj.matrix_to_quaternion(R, method="optimal"))(R.astype(dtype))
+        dots = np.abs(np.sum(np.asarray(q, np.float64) * Q, axis=-1))
+        assert np.abs(dots - 1).max() <= 4 * np.finfo(dtype).eps
+
+
+@pytest.mark.parametrize("n", [3 * 2**14 + 5, 2**15])
+def test_chunked_batches_agree_with_one_piece(n):
+    """Large batches run in chunks on the CPU (padded where the batch is not a multiple): the
+    same vectors as the kernel applied in one piece, in every batch element."""
+    from rotjax._eigen import _by_chunks, _polar
+
+    rng = np.random.default_rng(n)
+    B = jnp.asarray(rng.standard_normal((n, 3, 3)))
+    chunked = jax.jit(lambda B: _by_chunks(lambda b: _polar(b, False), B))(B)
+    whole = jax.jit(lambda B: _polar(B, False))(B)
+    assert chunked.shape == (n, 4)
+    assert np.abs(np.abs(np.sum(chunked * whole, axis=-1)) - 1).max() <= 1e-12
+    # a batch of two leading axes through the public function: the same per element
+    m = n // 2 * 2
+    q = rj.matrix_to_quaternion(B[:m].reshape(2, -1, 3, 3), method="optimal")
+    assert q.shape == (2, m // 2, 4)
+    flat = rj.matrix_to_quaternion(B[:m], method="optimal")
+    assert np.abs(np.abs(np.sum(q.reshape(m, 4) * flat, axis=-1)) - 1).max() <= 1e-12
