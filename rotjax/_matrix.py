@@ -275,7 +275,7 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
               About 35 more flops; brings noisy matrices to within O(sigma^2) of optimal.
             * ``"optimal"``: the quaternion of the nearest rotation (Bar-Itzhack 2000): the top
               eigenvector of the symmetric 4x4 ``K`` by rotjax's elementwise eigen kernel
-              (fixed Jacobi sweeps, then one power step; no LAPACK). Any input, ``det < 0``
+              (a one-sided Jacobi SVD of ``R``, fixed sweeps; no LAPACK). Any input, ``det < 0``
               included. Slowest: see the performance page.
         scalar_first: return ``(w, x, y, z)``.
 
@@ -303,8 +303,7 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
         is the derivative of the branch taken. ``"shepperd"`` has a hand-written rule for
         reverse-mode speed, equal to JAX's derivative of its code (tested). For the derivative
         of "the rotation nearest to this matrix", which ignores such perturbations to first
-        order, use ``"optimal"``: its gradient is that of the top eigenvector (the power step
-        does not change it), finite while the top eigenvalue is simple (always, for matrices
+        order, use ``"optimal"``: its gradient is that of the top eigenvector, finite while the top eigenvalue is simple (always, for matrices
         near a rotation).
     """
     (R,), dt = as_float(R)
