@@ -59,13 +59,26 @@ def pow2_scale(x, axes):
 
 
 def _pow2_scale_3x3(B):
-    """:func:`pow2_scale` of each ``(..., 3, 3)`` matrix, its maximum taken elementwise
-    (:func:`max_abs`): XLA:CPU compiles ``jnp.max`` over the small axes to a slow loop."""
-    m = max_abs(*(B[..., i, j] for i in range(3) for j in range(3)))[..., None, None]
-    _, e = jnp.frexp(jnp.where(jnp.isfinite(m) & (m > 0), m, 1.0))
-    h = e // 2
-    one = jnp.ones((), B.dtype)
-    return jnp.where(jnp.isfinite(m), B * jnp.ldexp(one, -h) * jnp.ldexp(one, h - e), jnp.nan)
+    """:func:`pow2_scale` of each ``(..., 3, 3)`` matrix, written for the kernel: the largest
+    ``|entry|`` is brought within ``2^+-k`` (``k`` half the exponent range) by a constant power
+    of two, and ``2^E`` of the result, read from its exponent bits, is inverted by one division,
+    exact for a power of two. That division is computed once per matrix; ``frexp`` and
+    ``ldexp`` are chains of cheap operations that XLA repeats for each entry of every loop
+    that reads the scaled matrix."""
+    dt = B.dtype
+    info = jnp.finfo(dt)
+    uint = jnp.uint32 if dt == jnp.float32 else jnp.uint64
+    m = max_abs(*(B[..., i, j] for i in range(3) for j in range(3)))
+    k = float(2 ** (info.nexp - 2))  # 2^k, 2^-k, and their products with 2^E stay normal
+    big, small = jnp.asarray(2.0**k, dt), jnp.asarray(2.0**-k, dt)
+    c = jnp.where(m > big, small, jnp.where(m < small, big, 1.0))
+    m = m * c
+    exp_bits = jnp.asarray(((1 << info.nexp) - 1) << info.nmant, uint)
+    p = jax.lax.bitcast_convert_type(jax.lax.bitcast_convert_type(m, uint) & exp_bits, dt)
+    ok = (m > 0) & jnp.isfinite(m)
+    inv = 0.5 / jnp.where(ok, p, 1.0)  # 2^-(E+1): the largest entry lands in [1/2, 1)
+    scaled = B * c[..., None, None] * inv[..., None, None]
+    return jnp.where(jnp.isfinite(m)[..., None, None], scaled, jnp.nan)
 
 
 def _rotation(app, aqq, apq):

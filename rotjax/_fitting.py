@@ -3,7 +3,8 @@ Wahba's problem, averaging and interpolation.
 
 The 9D projection, Wahba's problem and the mean are each the top eigenvector of a symmetric 4x4
 matrix, computed by :func:`rotjax._eigen.top_eigenvector` (a one-sided Jacobi SVD of the
-equivalent 3x3 matrix, elementwise over the batch; exact first and second derivatives where the top eigenvalue is simple, finite at ties).
+equivalent 3x3 matrix, elementwise over the batch; exact first and second derivatives where
+the top eigenvalue is simple, finite at ties).
 """
 
 from __future__ import annotations

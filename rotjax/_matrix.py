@@ -303,8 +303,8 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
         is the derivative of the branch taken. ``"shepperd"`` has a hand-written rule for
         reverse-mode speed, equal to JAX's derivative of its code (tested). For the derivative
         of "the rotation nearest to this matrix", which ignores such perturbations to first
-        order, use ``"optimal"``: its gradient is that of the top eigenvector, finite while the top eigenvalue is simple (always, for matrices
-        near a rotation).
+        order, use ``"optimal"``: its gradient is that of the top eigenvector, finite while
+        the top eigenvalue is simple (always, for matrices near a rotation).
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
