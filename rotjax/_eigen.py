@@ -35,14 +35,45 @@ from ._numerics import TIE_ULPS, eps, max_abs, safe_div
 # fewer leaves errors of 1e3-1e7 eps in float64.
 _SWEEPS = {jnp.dtype(jnp.float32): 3, jnp.dtype(jnp.float64): 4}
 _PAIRS = ((0, 1), (0, 2), (1, 2))
+# The most entries per batch element whose maximum pow2_scale takes elementwise.
+_UNROLL_MAX = 64
 # Batch elements per chunk on the CPU: the Jacobi state of a chunk fits in a core's L2 cache.
 _CHUNK = 2**14
 
 
+def _pow2_scaled(x, m):
+    """``x`` times the exact power of two that brings ``m`` (the largest ``|entry|`` of each
+    batch element of ``x``, broadcastable against it) into ``[1/2, 1)``; NaN where ``m`` is not
+    finite, ``x`` where ``m = 0``.
+
+    ``m`` is first brought within ``2^+-k`` (``k`` half the exponent range) by a constant power
+    of two, then ``2^E`` of the result, read from its exponent bits, is inverted by one
+    division, exact for a power of two. The division is computed once per batch element;
+    ``frexp`` and ``ldexp`` are chains of cheap operations that XLA repeats for each entry of
+    every loop that reads the scaled array."""
+    dt = x.dtype
+    info = jnp.finfo(dt)
+    uint = jnp.uint32 if dt == jnp.float32 else jnp.uint64
+    m = jax.lax.stop_gradient(m)  # the factor is a constant: the derivative is x's times it
+    k = float(2 ** (info.nexp - 2))  # 2^k, 2^-k, and their products with 2^E stay normal
+    big, small = jnp.asarray(2.0**k, dt), jnp.asarray(2.0**-k, dt)
+    c = jnp.where(m > big, small, jnp.where(m < small, big, 1.0))
+    mc = m * c
+    exp_bits = jnp.asarray(((1 << info.nexp) - 1) << info.nmant, uint)
+    p = jax.lax.bitcast_convert_type(jax.lax.bitcast_convert_type(mc, uint) & exp_bits, dt)
+    # Both factors (c and 2^-(E+1), each normal; NaN for a non-finite m) as one quotient, so
+    # that XLA computes them once and each entry costs two multiplications.
+    nan = jnp.where(jnp.isfinite(m), 1.0, jnp.nan)
+    den = jnp.where((mc > 0) & jnp.isfinite(mc), p, 1.0)
+    f = jnp.stack([c * nan, 0.5 * nan], -1) / jnp.stack([jnp.ones_like(den), den], -1)
+    return x * f[..., 0] * f[..., 1]
+
+
 def _pow2_factor(x, axes):
-    """The exact power of two ``2^-e`` (as two factors, since ``2^-e`` alone overflows for
-    subnormal maxima) that brings the largest ``|entry|`` over ``axes`` into ``[1/2, 1)``, and
-    whether that maximum is finite. 1 where the maximum is zero or not finite."""
+    """The exact power of two (as two factors, since ``2^-e`` alone overflows for subnormal
+    maxima) that brings the largest ``|entry|`` over ``axes`` into ``[1/2, 1)``, and whether
+    that maximum is finite. 1 where the maximum is zero or not finite. For derivative rules,
+    where the factor must be a constant."""
     m = jnp.max(jnp.abs(x), axis=axes, keepdims=True)
     _, e = jnp.frexp(jnp.where(jnp.isfinite(m) & (m > 0), m, 1.0))
     h = e // 2
@@ -52,33 +83,19 @@ def _pow2_factor(x, axes):
 
 def pow2_scale(x, axes):
     """``x`` times an exact power of two per batch element, so that the largest ``|entry|`` over
-    ``axes`` lies in ``[1/2, 1)``; no rounding. Zero stays zero; a non-finite entry gives NaN
-    over the whole element."""
-    f1, f2, finite = _pow2_factor(x, axes)
-    return jnp.where(finite, x * f1 * f2, jnp.nan)
-
-
-def _pow2_scale_3x3(B):
-    """:func:`pow2_scale` of each ``(..., 3, 3)`` matrix, written for the kernel: the largest
-    ``|entry|`` is brought within ``2^+-k`` (``k`` half the exponent range) by a constant power
-    of two, and ``2^E`` of the result, read from its exponent bits, is inverted by one division,
-    exact for a power of two. That division is computed once per matrix; ``frexp`` and
-    ``ldexp`` are chains of cheap operations that XLA repeats for each entry of every loop
-    that reads the scaled matrix."""
-    dt = B.dtype
-    info = jnp.finfo(dt)
-    uint = jnp.uint32 if dt == jnp.float32 else jnp.uint64
-    m = max_abs(*(B[..., i, j] for i in range(3) for j in range(3)))
-    k = float(2 ** (info.nexp - 2))  # 2^k, 2^-k, and their products with 2^E stay normal
-    big, small = jnp.asarray(2.0**k, dt), jnp.asarray(2.0**-k, dt)
-    c = jnp.where(m > big, small, jnp.where(m < small, big, 1.0))
-    m = m * c
-    exp_bits = jnp.asarray(((1 << info.nexp) - 1) << info.nmant, uint)
-    p = jax.lax.bitcast_convert_type(jax.lax.bitcast_convert_type(m, uint) & exp_bits, dt)
-    ok = (m > 0) & jnp.isfinite(m)
-    inv = 0.5 / jnp.where(ok, p, 1.0)  # 2^-(E+1): the largest entry lands in [1/2, 1)
-    scaled = B * c[..., None, None] * inv[..., None, None]
-    return jnp.where(jnp.isfinite(m)[..., None, None], scaled, jnp.nan)
+    the trailing ``axes`` lies in ``[1/2, 1)``; no rounding. Zero stays zero; a non-finite entry
+    gives NaN over the whole element."""
+    n = len(axes)
+    if sorted(a % x.ndim for a in axes) != list(range(x.ndim - n, x.ndim)):
+        raise ValueError(f"axes must be the trailing axes, got {axes} for shape {x.shape}")
+    flat = x.reshape(*x.shape[: x.ndim - n], -1)
+    if flat.shape[-1] <= _UNROLL_MAX:
+        # Elementwise maxima fuse with their neighbours and keep NaN (a max reduction over a
+        # small axis is a loop of its own; with NaN made infinite first, a slow one).
+        m = max_abs(*(flat[..., i] for i in range(flat.shape[-1])))[..., None]
+    else:
+        m = jnp.max(jnp.where(jnp.isnan(flat), jnp.inf, jnp.abs(flat)), axis=-1, keepdims=True)
+    return _pow2_scaled(flat, m).reshape(x.shape)
 
 
 def _rotation(app, aqq, apq):
@@ -156,7 +173,7 @@ def _polar(B, with_v):
     """
     from ._matrix import _k4_columns  # _matrix imports this module
 
-    Bs = _pow2_scale_3x3(B)
+    Bs = pow2_scale(B, (-2, -1))
     eye = jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), Bs.shape)
     S = jnp.concatenate([Bs, eye], axis=-2)
     for _ in range(_SWEEPS[jnp.dtype(B.dtype)]):

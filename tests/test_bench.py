@@ -383,3 +383,7 @@ def test_merge_replaces_the_measured_operations_and_notes_the_run():
     assert [e["date"] for e in R.later_runs(again)] == ["d2"]
     with pytest.raises(ValueError, match="batch"):
         R.merge(meta, rows, {**new_meta, "batch": 16}, rows)
+    # a run on another machine says so
+    other = {**new_meta, "machine": {"cpu": "Other CPU", "cores": 2}}
+    elsewhere, _ = R.merge({**meta, "machine": {"cpu": "CPU", "cores": 2}}, rows, other, rows[:1])
+    assert "from a run of d1 on Other CPU (2 cores)" in R.provenance(elsewhere)

@@ -71,7 +71,7 @@ def later_runs(meta) -> list[dict]:
 def merge(meta, rows, new_meta, new_rows, why=""):
     """``(meta, rows)`` with the operations of ``new_rows`` replaced by them, in the registry's
     order, and the later run noted in ``meta["rows_from_a_later_run"]``. The two runs must
-    share the batch size and device."""
+    share the batch size and device; a run on another machine is noted with its machine."""
     from .cases import CASES
 
     for key in ("batch", "device"):
@@ -87,6 +87,8 @@ def merge(meta, rows, new_meta, new_rows, why=""):
     later = [e for e in later if e["ops"]]
     entry = {"ops": sorted(ops, key=order.get), "date": new_meta["date"]}
     entry.update(seconds=new_meta.get("seconds"), versions=new_meta.get("versions"))
+    if new_meta.get("machine") != meta.get("machine"):
+        entry["machine"] = new_meta.get("machine")
     if why:
         entry["why"] = why
     return {**meta, "rows_from_a_later_run": later + [entry]}, merged
@@ -132,6 +134,10 @@ def table(rows) -> str:
     return "\n".join(lines)
 
 
+def _machine(m) -> str:
+    return f"{m.get('cpu', '?')} ({m.get('cores', '?')} cores)"
+
+
 def provenance(meta) -> str:
     """One line: machine, device, date, versions and batch of a run."""
     m = meta.get("machine", {})
@@ -140,13 +146,14 @@ def provenance(meta) -> str:
     batch = meta.get("batch")
     size = f"2^{batch.bit_length() - 1}" if batch and batch & (batch - 1) == 0 else str(batch)
     line = (
-        f"Machine: {m.get('cpu', '?')} ({m.get('cores', '?')} cores), device {meta.get('device')}"
+        f"Machine: {_machine(m)}, device {meta.get('device')}"
         f"; date {meta.get('date')}; {vs}; batch {size}"
         + ("; --quick" if meta.get("quick") else "")
         + "."
     )
     for later in later_runs(meta):
-        line += f" Rows of {', '.join(later['ops'])} from a run of {later['date']}."
+        on = f" on {_machine(later['machine'])}" if later.get("machine") else ""
+        line += f" Rows of {', '.join(later['ops'])} from a run of {later['date']}{on}."
     return line
 
 
@@ -266,11 +273,14 @@ def figure(meta, rows):
     fig.legend(handles=by_colour, title="contender (colour)", ncol=4, bbox_to_anchor=(0.4, 0), **kw)
     fig.legend(handles=by_marker, title="dtype (marker)", ncol=4, bbox_to_anchor=(0.8, 0), **kw)
     m = meta.get("machine", {})
-    fig.suptitle(
+    title = (
         f"rotjax benchmark on {m.get('cpu', '?')} ({meta.get('device')}), {meta.get('date')}, "
-        f"jax {meta.get('jax')}, batch {meta.get('batch')}",
-        fontsize=11,
+        f"jax {meta.get('jax')}, batch {meta.get('batch')}"
     )
+    for later in later_runs(meta):
+        if later.get("machine"):
+            title += f"\n{', '.join(later['ops'])}: {later['date']} on {_machine(later['machine'])}"
+    fig.suptitle(title, fontsize=11)
     fig.tight_layout(rect=(0, 0.13, 1, 1))
     return fig
 
