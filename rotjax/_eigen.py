@@ -37,7 +37,8 @@ _SWEEPS = {jnp.dtype(jnp.float32): 3, jnp.dtype(jnp.float64): 4}
 _PAIRS = ((0, 1), (0, 2), (1, 2))
 # The most entries per batch element whose maximum pow2_scale takes elementwise.
 _UNROLL_MAX = 64
-# Batch elements per chunk on the CPU: the Jacobi state of a chunk fits in a core's L2 cache.
+# Batch elements per chunk on the CPU: a chunk's Jacobi state (18 numbers a matrix) stays in
+# cache between the rotations.
 _CHUNK = 2**14
 
 
@@ -163,8 +164,8 @@ def _pick(masks, cols):
 
 
 def _polar(B, with_v):
-    """Scalar-last unit quaternion of the rotation maximising ``tr(Q^T B)`` for ``(..., 3, 3)``
-    ``B`` (``w >= 0``), and with ``with_v`` the right singular vectors ``(..., 3, 3)`` (columns).
+    """Scalar-last unit quaternion (sign arbitrary) of the rotation maximising ``tr(Q^T B)`` for
+    ``(..., 3, 3)`` ``B``, and with ``with_v`` the right singular vectors ``(..., 3, 3)`` (columns).
 
     One-sided Jacobi: the columns of ``W = B V`` are rotated in pairs until orthogonal, the
     rotations accumulated in ``V``; both are rows of one ``(..., 6, 3)`` state, so each rotation
@@ -333,13 +334,6 @@ def top_eigenvector(K):
     """
     _check(K)
     return _nearest(_k_to_b(K))
-
-
-def top_eigenpair(K):
-    """``(lambda, v)``: the top eigenvector (:func:`top_eigenvector`) and its Rayleigh quotient
-    ``v^T K v``, shapes ``(...,)`` and ``(..., 4)``."""
-    v = top_eigenvector(K)
-    return _dot(v, _mv(K, v))[..., 0], v
 
 
 # The derivative rule's small products are sums of per-element terms, not ``jnp.sum`` over a

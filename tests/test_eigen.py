@@ -194,3 +194,19 @@ def test_chunked_batches_agree_with_one_piece(n):
     assert q.shape == (2, m // 2, 4)
     flat = rj.matrix_to_quaternion(B[:m], method="optimal")
     assert np.abs(np.abs(np.sum(q.reshape(m, 4) * flat, axis=-1)) - 1).max() <= 1e-12
+
+
+@pytest.mark.parametrize("name", ["gaussian", "sigma=0.3", "det<0", "near-tie"])
+def test_eigh4_is_a_full_eigendecomposition(name):
+    """The derivative rule's eigenvectors: the top one and its compositions with half turns
+    about the right singular vectors of B are orthonormal, and K E = E diag(lambda)."""
+    from rotjax._eigen import eigh4
+
+    K = CASES[name]
+    lam, E = map(np.asarray, jax.jit(eigh4)(jnp.asarray(K)))
+    np.testing.assert_allclose(
+        np.swapaxes(E, -1, -2) @ E, np.broadcast_to(np.eye(4), E.shape), atol=1e-14
+    )
+    np.testing.assert_allclose(K @ E, E * lam[:, None, :], atol=1e-13 * np.abs(K).max())
+    np.testing.assert_allclose(np.sort(lam), np.linalg.eigvalsh(K), atol=1e-13 * np.abs(K).max())
+    assert (lam[:, 0] >= lam.max(axis=-1) - 1e-13 * np.abs(K).max()).all()  # the first is the top
