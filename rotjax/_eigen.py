@@ -70,18 +70,6 @@ def _pow2_scaled(x, m):
     return x * f[..., 0] * f[..., 1]
 
 
-def _pow2_factor(x, axes):
-    """The exact power of two (as two factors, since ``2^-e`` alone overflows for subnormal
-    maxima) that brings the largest ``|entry|`` over ``axes`` into ``[1/2, 1)``, and whether
-    that maximum is finite. 1 where the maximum is zero or not finite. For derivative rules,
-    where the factor must be a constant."""
-    m = jnp.max(jnp.abs(x), axis=axes, keepdims=True)
-    _, e = jnp.frexp(jnp.where(jnp.isfinite(m) & (m > 0), m, 1.0))
-    h = e // 2
-    one = jnp.ones((), x.dtype)
-    return jnp.ldexp(one, -h), jnp.ldexp(one, h - e), jnp.isfinite(m)
-
-
 def pow2_scale(x, axes):
     """``x`` times an exact power of two per batch element, so that the largest ``|entry|`` over
     the trailing ``axes`` lies in ``[1/2, 1)``; no rounding. Zero stays zero; a non-finite entry
@@ -375,8 +363,8 @@ def _top_jvp(primals, tangents):
     # to the top below TIE_ULPS eps |K| is a tie: X is 0 there. K = davenport_k(B) scaled by an
     # exact power of two (v does not depend on the scale).
     (B, q), (dB, _) = primals, tangents
-    f1, f2, _ = jax.lax.stop_gradient(_pow2_factor(B, (-2, -1)))
-    K, dK = davenport_k(B * f1 * f2), davenport_k(dB * f1 * f2)
+    Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor
+    K, dK = davenport_k(Bs), davenport_k(dBs)
     qe, V = jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, True), B))
     E = _half_turns(qe, V)
     lam_all = jax.lax.stop_gradient(_rayleigh(K, E))
