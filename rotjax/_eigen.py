@@ -296,16 +296,19 @@ def eigh4(K):
 
 
 @jax.custom_jvp
-def _top(B, q):
-    """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller, differentiated
-    as that function of ``B``."""
-    del B
+def _top(B, q, V):
+    """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller with the right
+    singular vectors ``V`` of ``B``, differentiated as that function of ``B``."""
+    del B, V
     return q
 
 
 def _nearest(B):
-    """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`)."""
-    return _top(B, jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, False), B)))
+    """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`).
+    ``V`` is an output of the same run, so that a derivative needs no second one; where nothing
+    is differentiated it is unused, and XLA drops it."""
+    q, V = jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, True), B))
+    return _top(B, q, V)
 
 
 def top_eigenvector(K):
@@ -362,13 +365,12 @@ def _top_jvp(primals, tangents):
     # eigenvalue: lower ties (exact rotations, identical inputs to a mean) do not appear. A gap
     # to the top below TIE_ULPS eps |K| is a tie: X is 0 there. K = davenport_k(B) scaled by an
     # exact power of two (v does not depend on the scale).
-    (B, q), (dB, _) = primals, tangents
+    (B, qe, V), (dB, _, _) = primals, tangents
     Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor
     K, dK = davenport_k(Bs), davenport_k(dBs)
-    qe, V = jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, True), B))
     E = _half_turns(qe, V)
     lam_all = jax.lax.stop_gradient(_rayleigh(K, E))
-    v = _top(B, q)
+    v = _top(B, qe, V)
     lam = _dot(v, _mv(K, v))[..., 0]
     top = lam_all[..., :1]
     scale = max_abs(*jnp.moveaxis(lam_all, -1, 0))[..., None]
