@@ -88,21 +88,28 @@ def pow2_scale(x, axes):
 
 
 def _rotation(app, aqq, apq):
-    """``(c, s)`` of the Jacobi rotation that zeroes ``a_pq`` of the symmetric 2x2
-    ``[[a_pp, a_pq], [a_pq, a_qq]]``: ``t = tan(theta)`` the smaller root of
-    ``t^2 + 2 tau t - 1 = 0``, ``tau = (a_qq - a_pp) / (2 a_pq)`` (Golub & Van Loan 8.5.2),
-    written as ``t = 2 a_pq / (d + sign(d) sqrt(d^2 + 4 a_pq^2))``, ``d = a_qq - a_pp``, which
-    needs no division by ``a_pq``. Both zero (underflowed squares included): ``t = 0``.
+    """``(c, s)`` of a Jacobi rotation that zeroes ``a_pq`` of the symmetric 2x2
+    ``[[a_pp, a_pq], [a_pq, a_qq]]`` and leaves the larger diagonal entry first: a sorting
+    rotation, so that after the last sweep the columns are in decreasing order of norm.
 
-    ``c`` and ``s`` come from the one quotient ``t``: XLA recomputes cheap expressions in each
-    loop that uses them, and a sign of ``d`` taken twice at ``d ~ 0`` (an exact rotation) could
-    differ between the loops that update the two columns. ``c = sqrt(1 / (1 + t^2))``, as
-    XLA:CPU compiles ``rsqrt`` to a slow loop."""
+    ``t = tan(theta)`` is the smaller root of ``t^2 + 2 tau t - 1 = 0``, ``tau = (a_qq - a_pp) /
+    (2 a_pq)`` (Golub & Van Loan 8.5.2), written ``t = 2 a_pq / (d + sign(d) r)``, ``d = a_qq -
+    a_pp``, ``r = sqrt(d^2 + 4 a_pq^2)``: it gives ``a_pp' = a_pp - t a_pq``, larger than
+    ``a_qq'`` where ``d < 0``. Elsewhere the rotation is by ``theta + pi/2``, ``t = -(d + r) /
+    (2 a_pq)``, which swaps the two results (``-inf``, capped, for ``a_pq = 0 < d``: a swap).
+
+    Each choice is made inside the one quotient ``t``, and ``c`` and ``s`` come from it: XLA
+    recomputes cheap expressions in every loop that uses them, and a sign of ``d`` taken twice
+    at ``d ~ 0`` (an exact rotation) could differ between the loops that update the two columns.
+    ``c = sqrt(1 / (1 + t^2))``, as XLA:CPU compiles ``rsqrt`` to a slow loop."""
     d = aqq - app
     r = jnp.sqrt(d * d + 4.0 * apq * apq)
-    den = jnp.where(d < 0, d - r, d + r)
-    zero = den == 0
-    t = jnp.where(zero, 0.0, 2.0 * apq / jnp.where(zero, 1.0, den))  # double where
+    keep = d < 0
+    num = jnp.where(keep, 2.0 * apq, -(d + r))
+    den = jnp.where(keep, d - r, 2.0 * apq)
+    zero = den == 0  # a_pq = 0 <= d: swap (0 = d = r: nothing to do)
+    big = 1.0 / eps(app.dtype) ** 2  # c ~ eps^2: a swap to well below the rounding level
+    t = jnp.where(zero, jnp.where(num == 0, 0.0, -big), num) / jnp.where(zero, 1.0, den)
     c = jnp.sqrt(1.0 / (1.0 + t * t))
     return c, t * c
 
@@ -138,27 +145,15 @@ def _perpendicular(u):
     return [x * inv for x in p]
 
 
-def _pick(masks, cols):
-    """Columns ``(a, b)``: the two of ``cols`` other than the one ``masks`` marks smallest."""
-    m0, m1 = masks
-
-    def sel(i0, i1, i2):
-        return [
-            jnp.where(m0, x, jnp.where(m1, y, z))
-            for x, y, z in zip(*(cols[i] for i in (i0, i1, i2)), strict=True)
-        ]
-
-    return sel(1, 0, 0), sel(2, 2, 1)
-
-
-def _polar(B, with_v):
+def _polar(B):
     """Scalar-last unit quaternion (sign arbitrary) of the rotation maximising ``tr(Q^T B)`` for
-    ``(..., 3, 3)`` ``B``, and with ``with_v`` the right singular vectors ``(..., 3, 3)`` (columns).
+    ``(..., 3, 3)`` ``B``, and the right singular vectors ``(..., 3, 3)`` (columns).
 
     One-sided Jacobi: the columns of ``W = B V`` are rotated in pairs until orthogonal, the
     rotations accumulated in ``V``; both are rows of one ``(..., 6, 3)`` state, so each rotation
-    is one loop over it. Then ``Q = u_a v_a^T + u_b v_b^T + (u_a x u_b)(v_a x v_b)^T`` from the
-    two largest columns ``u = w / |w|`` (a rotation, whatever the sign of ``det B``).
+    is one loop over it. The rotations sort the columns (:func:`_rotation`), so the first two
+    are the largest, and ``Q = u_a v_a^T + u_b v_b^T + (u_a x u_b)(v_a x v_b)^T`` from them,
+    ``u = w / |w|``: a rotation, whatever the sign of ``det B``.
     """
     from ._matrix import _k4_columns  # _matrix imports this module
 
@@ -176,15 +171,9 @@ def _polar(B, with_v):
             c, s = (x[..., None] for x in _rotation(alpha, beta, gamma))
             cols[p], cols[q] = c * cols[p] - s * cols[q], s * cols[p] + c * cols[q]
             S = jnp.stack(cols, axis=-1)
-    W = [[S[..., i, j] for i in range(3)] for j in range(3)]
-    V = [[S[..., 3 + i, j] for i in range(3)] for j in range(3)]
-    n = [_dot3(w, w) for w in W]
-    # The smallest column as an integer from one reduction: a comparison of the norms
-    # themselves could be evaluated in two loops with different roundings of near-equal norms
-    # (XLA recomputes cheap values per loop) and pair u_a with another v_a.
-    k = jnp.argmin(jnp.stack(n, axis=-1), axis=-1)
-    masks = (k == 0, k == 1)
-    (wa, wb), (va, vb) = _pick(masks, W), _pick(masks, V)
+    (wa, wb, _), (va, vb, _) = (
+        [[S[..., i, j] for i in rows] for j in range(3)] for rows in ((0, 1, 2), (3, 4, 5))
+    )
     ua = _unit_or(wa, va)  # B = 0: any rotation
     ub = _unit_or(wb, _perpendicular(ua))  # rank 1: any rotation taking v_a to u_a
     uc, vc = _cross3(ua, ub), _cross3(va, vb)
@@ -204,9 +193,7 @@ def _polar(B, with_v):
         for x, y, z, w in zip(*cols, strict=True)
     ]
     q = jnp.stack(c, axis=-1) * jnp.sqrt(1.0 / sum(x * x for x in c))[..., None]
-    if not with_v:
-        return q
-    return q, jnp.stack([jnp.stack(v, -1) for v in V], -1)
+    return q, S[..., 3:, :]
 
 
 def _by_chunks(fn, B):
@@ -289,7 +276,7 @@ def eigh4(K):
     equivalent 3x3 matrix; the eigenvalues are the Rayleigh quotients. A non-finite entry gives
     NaN. No derivative rule: see :func:`top_eigenvector`."""
     _check(K)
-    q, V = _by_chunks(lambda B: _polar(B, True), _k_to_b(K))
+    q, V = _by_chunks(_polar, _k_to_b(K))
     E = _half_turns(q, V)
     Ks = 0.5 * (K + jnp.swapaxes(K, -1, -2))
     return _rayleigh(Ks, E), E
@@ -307,7 +294,7 @@ def _nearest(B):
     """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`).
     ``V`` is an output of the same run, so that a derivative needs no second one; where nothing
     is differentiated it is unused, and XLA drops it."""
-    q, V = jax.lax.stop_gradient(_by_chunks(lambda b: _polar(b, True), B))
+    q, V = jax.lax.stop_gradient(_by_chunks(_polar, B))
     return _top(B, q, V)
 
 

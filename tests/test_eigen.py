@@ -184,10 +184,11 @@ def test_chunked_batches_agree_with_one_piece(n):
 
     rng = np.random.default_rng(n)
     B = jnp.asarray(rng.standard_normal((n, 3, 3)))
-    chunked = jax.jit(lambda B: _by_chunks(lambda b: _polar(b, False), B))(B)
-    whole = jax.jit(lambda B: _polar(B, False))(B)
-    assert chunked.shape == (n, 4)
+    chunked, vc = jax.jit(lambda B: _by_chunks(_polar, B))(B)
+    whole, vw = jax.jit(_polar)(B)
+    assert chunked.shape == (n, 4) and vc.shape == (n, 3, 3)
     assert np.abs(np.abs(np.sum(chunked * whole, axis=-1)) - 1).max() <= 1e-12
+    assert np.abs(np.abs(np.sum(vc * vw, axis=-2)) - 1).max() <= 1e-12  # columns, up to sign
     # a batch of two leading axes through the public function: the same per element
     m = n // 2 * 2
     q = rj.matrix_to_quaternion(B[:m].reshape(2, -1, 3, 3), method="optimal")
