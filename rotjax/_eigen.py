@@ -22,6 +22,7 @@ matrix (Bar-Itzhack 2000), Wahba's problem (Davenport's q-method) and the quater
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -38,8 +39,9 @@ _PAIRS = ((0, 1), (0, 2), (1, 2))
 # The most entries per batch element whose maximum pow2_scale takes elementwise.
 _UNROLL_MAX = 64
 # Batch elements per chunk on the CPU: a chunk's Jacobi state (18 numbers a matrix) stays in
-# cache between the rotations.
-_CHUNK = 2**14
+# cache between the rotations, and each chunk costs a fixed overhead (one call per loop of the
+# kernel), so the chunk is as large as the cache allows: smaller in float64.
+_CHUNK = {jnp.dtype(jnp.float32): 2**14, jnp.dtype(jnp.float64): 2**10}
 
 
 def _pow2_scaled(x, m):
@@ -146,7 +148,7 @@ def _perpendicular(u):
 
 
 def _polar(B):
-    """Scalar-last unit quaternion (sign arbitrary) of the rotation maximising ``tr(Q^T B)`` for
+    """Scalar-last unit quaternion (``w >= 0``) of the rotation maximising ``tr(Q^T B)`` for
     ``(..., 3, 3)`` ``B``, and the right singular vectors ``(..., 3, 3)`` (columns).
 
     One-sided Jacobi: the columns of ``W = B V`` are rotated in pairs until orthogonal, the
@@ -184,15 +186,17 @@ def _polar(B):
         ],
         -2,
     )
-    # Shepperd's extraction: the column of K = 4 q q^T with the largest diagonal, normalised
-    # (an argmax again, for one choice across the four components).
+    # Shepperd's extraction: the column of K = 4 q q^T with the largest diagonal, normalised to
+    # w >= 0 (an argmax, and the sign inside the one quotient, for one choice across the four
+    # components).
     cols, diag = _k4_columns(Q)
     k = jnp.argmax(jnp.stack(diag, axis=-1), axis=-1)
     c = [
         jnp.where(k == 0, x, jnp.where(k == 1, y, jnp.where(k == 2, z, w)))
         for x, y, z, w in zip(*cols, strict=True)
     ]
-    q = jnp.stack(c, axis=-1) * jnp.sqrt(1.0 / sum(x * x for x in c))[..., None]
+    inv = jnp.where(c[3] < 0, -1.0, 1.0) / jnp.sqrt(sum(x * x for x in c))
+    q = jnp.stack(c, axis=-1) * inv[..., None]
     return q, S[..., 3:, :]
 
 
@@ -201,15 +205,16 @@ def _by_chunks(fn, B):
     with identities), elsewhere in one piece."""
     batch = B.shape[:-2]
     n = math.prod(batch)
-    if n <= _CHUNK:
+    chunk = _CHUNK[jnp.dtype(B.dtype)]
+    if n <= chunk:
         return fn(B)
 
     def chunked(B):
         flat = B.reshape(n, 3, 3)
-        pad = -n % _CHUNK
+        pad = -n % chunk
         if pad:
             flat = jnp.concatenate([flat, jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), (pad, 3, 3))])
-        out = jax.lax.map(fn, flat.reshape(-1, _CHUNK, 3, 3))
+        out = jax.lax.map(fn, flat.reshape(-1, chunk, 3, 3))
         return jax.tree.map(
             lambda o: o.reshape(-1, *o.shape[2:])[:n].reshape(*batch, *o.shape[2:]), out
         )
@@ -302,9 +307,10 @@ def top_eigenvector(K):
     """Unit eigenvector ``(..., 4)`` of the largest eigenvalue of the symmetric part of a
     ``(..., 4, 4)`` ``K``.
 
-    The sign is arbitrary. Where the top eigenvalue is simple the result is accurate to a few
-    eps divided by the relative gap to the next one, at any finite scale of ``K``; a non-finite
-    entry gives NaN; a multiple of ``I`` gives a unit vector (every vector is an eigenvector).
+    The last component is ``>= 0``. Where the top eigenvalue is simple the result is accurate to
+    a few eps divided by the relative gap to the next one, at any finite scale of ``K``; a
+    non-finite entry gives NaN; a multiple of ``I`` gives a unit vector (every vector is an
+    eigenvector).
 
     Derivative: exact while the top eigenvalue is simple, and differentiable again (second
     derivatives exact there). At a tie with the top eigenvalue the component of the derivative
@@ -401,9 +407,12 @@ def davenport_k(B):
 
 
 def nearest_quaternion(B):
-    """Scalar-last unit quaternion ``(..., 4)`` (sign arbitrary) of the rotation ``R`` maximising
+    """Scalar-last unit quaternion ``(..., 4)``, ``w >= 0``, of the rotation ``R`` maximising
     ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B``: the nearest rotation to ``B``, ``det B < 0``
     included. NaN where ``B`` is zero or not finite. Independent of the scale of ``B``."""
     v = _nearest(B)
-    zero = jnp.all(B == 0, axis=(-2, -1))[..., None]
-    return jnp.where(zero, jnp.nan, v)
+    # elementwise, so that it fuses (a reduction over the 3x3 axes is a loop of its own)
+    zero = functools.reduce(
+        jnp.logical_and, (B[..., i, j] == 0 for i in range(3) for j in range(3))
+    )
+    return jnp.where(zero[..., None], jnp.nan, v)

@@ -13,7 +13,6 @@ import jax
 import jax.numpy as jnp
 
 from ._eigen import nearest_quaternion, pow2_scale, top_eigenvector
-from ._matrix import _positive_w
 from ._numerics import (
     FULL,
     as_float,
@@ -275,7 +274,7 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
     b = pow2_scale(b, (-2, -1))
     B = jnp.einsum("...ni,...nj->...ij", a, b, precision=FULL)
     q = nearest_quaternion(B)
-    return from_scalar_last(_positive_w(q), scalar_first).astype(dt)
+    return from_scalar_last(q, scalar_first).astype(dt)  # w >= 0
 
 
 # --- averaging and interpolation ---------------------------------------------------------
@@ -326,7 +325,7 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
     v = top_eigenvector(M)
     if weights is not None:
         v = jnp.where(jnp.all(weights == 0, axis=-1, keepdims=True), jnp.nan, v)
-    return from_scalar_last(_positive_w(v), scalar_first).astype(dt)
+    return from_scalar_last(v, scalar_first).astype(dt)  # w >= 0
 
 
 @public

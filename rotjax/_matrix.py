@@ -53,11 +53,6 @@ def _k4_columns(R, one=1.0):
     return cols, (dx, dy, dz, dw)
 
 
-def _positive_w(q):
-    """Choose the ``w >= 0`` hemisphere (both signs are the same rotation)."""
-    return jnp.where(q[..., 3:] < 0, -q, q)
-
-
 def _select(masks, vals):
     """``vals[i]`` for the first true mask ``(use_x, use_y, use_z)``, else ``vals[3]``.
 
@@ -254,7 +249,7 @@ def _from_matrix(R, method: str):
     if method == "markley":
         return _markley(R)
     if method == "optimal":
-        return _positive_w(nearest_quaternion(R))  # Bar-Itzhack 2000; see rotjax._eigen
+        return nearest_quaternion(R)  # Bar-Itzhack 2000, w >= 0; see rotjax._eigen
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
 

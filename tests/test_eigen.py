@@ -176,25 +176,28 @@ def test_exact_rotations_under_jit():
         assert np.abs(dots - 1).max() <= 4 * np.finfo(dtype).eps
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize("n", [3 * 2**14 + 5, 2**15])
-def test_chunked_batches_agree_with_one_piece(n):
-    """Large batches run in chunks on the CPU (padded where the batch is not a multiple): the
-    same vectors as the kernel applied in one piece, in every batch element."""
+def test_chunked_batches_agree_with_one_piece(n, dtype):
+    """Large batches run in chunks on the CPU (padded where the batch is not a multiple; the
+    chunk size depends on the dtype): the same vectors as the kernel applied in one piece, in
+    every batch element (up to rounding, which near-ties among random matrices amplify)."""
     from rotjax._eigen import _by_chunks, _polar
 
+    tol = 1e-12 if dtype == np.float64 else 1e-5  # on 1 - |cos|: angles of 1e-6 and 3e-3
     rng = np.random.default_rng(n)
-    B = jnp.asarray(rng.standard_normal((n, 3, 3)))
+    B = jnp.asarray(rng.standard_normal((n, 3, 3)), dtype)
     chunked, vc = jax.jit(lambda B: _by_chunks(_polar, B))(B)
     whole, vw = jax.jit(_polar)(B)
     assert chunked.shape == (n, 4) and vc.shape == (n, 3, 3)
-    assert np.abs(np.abs(np.sum(chunked * whole, axis=-1)) - 1).max() <= 1e-12
-    assert np.abs(np.abs(np.sum(vc * vw, axis=-2)) - 1).max() <= 1e-12  # columns, up to sign
+    assert np.abs(np.abs(np.sum(chunked * whole, axis=-1)) - 1).max() <= tol
+    assert np.abs(np.abs(np.sum(vc * vw, axis=-2)) - 1).max() <= tol  # columns, up to sign
     # a batch of two leading axes through the public function: the same per element
     m = n // 2 * 2
     q = rj.matrix_to_quaternion(B[:m].reshape(2, -1, 3, 3), method="optimal")
     assert q.shape == (2, m // 2, 4)
     flat = rj.matrix_to_quaternion(B[:m], method="optimal")
-    assert np.abs(np.abs(np.sum(q.reshape(m, 4) * flat, axis=-1)) - 1).max() <= 1e-12
+    assert np.abs(np.abs(np.sum(q.reshape(m, 4) * flat, axis=-1)) - 1).max() <= tol
 
 
 @pytest.mark.parametrize("name", ["gaussian", "sigma=0.3", "det<0", "near-tie"])
