@@ -148,8 +148,9 @@ def _perpendicular(u):
 
 
 def _polar(B):
-    """Scalar-last unit quaternion (``w >= 0``) of the rotation maximising ``tr(Q^T B)`` for
-    ``(..., 3, 3)`` ``B``, and the right singular vectors ``(..., 3, 3)`` (columns).
+    """Scalar-last unit quaternion (``w >= 0``) of the rotation ``Q`` maximising ``tr(Q^T B)``
+    for ``(..., 3, 3)`` ``B``, the right singular vectors ``(..., 3, 3)`` (columns), and ``Q``.
+    (XLA drops the outputs a caller does not use.)
 
     One-sided Jacobi: the columns of ``W = B V`` are rotated in pairs until orthogonal, the
     rotations accumulated in ``V``; both are rows of one ``(..., 6, 3)`` state, so each rotation
@@ -188,16 +189,20 @@ def _polar(B):
     )
     # Shepperd's extraction: the column of K = 4 q q^T with the largest diagonal, normalised to
     # w >= 0 (an argmax, and the sign inside the one quotient, for one choice across the four
-    # components).
+    # components). Within rounding of 180 degrees (|w| <= 4 eps) w is 0 and the selected
+    # component positive, so that rounding of the input cannot flip the result.
     cols, diag = _k4_columns(Q)
     k = jnp.argmax(jnp.stack(diag, axis=-1), axis=-1)
     c = [
         jnp.where(k == 0, x, jnp.where(k == 1, y, jnp.where(k == 2, z, w)))
         for x, y, z, w in zip(*cols, strict=True)
     ]
-    inv = jnp.where(c[3] < 0, -1.0, 1.0) / jnp.sqrt(sum(x * x for x in c))
+    n = sum(x * x for x in c)
+    flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
+    inv = jnp.where(flip, -1.0, 1.0) / jnp.sqrt(n)
     q = jnp.stack(c, axis=-1) * inv[..., None]
-    return q, S[..., 3:, :]
+    q = jnp.concatenate([q[..., :3], jnp.maximum(q[..., 3:], 0.0)], axis=-1)
+    return q, S[..., 3:, :], Q
 
 
 def _by_chunks(fn, B):
@@ -281,10 +286,19 @@ def eigh4(K):
     equivalent 3x3 matrix; the eigenvalues are the Rayleigh quotients. A non-finite entry gives
     NaN. No derivative rule: see :func:`top_eigenvector`."""
     _check(K)
-    q, V = _by_chunks(_polar, _k_to_b(K))
+    q, V, _ = _by_chunks(_polar, _k_to_b(K))
     E = _half_turns(q, V)
     Ks = 0.5 * (K + jnp.swapaxes(K, -1, -2))
     return _rayleigh(Ks, E), E
+
+
+def _nan_at_zero(B, x):
+    """``x`` with NaN where ``B`` is the zero matrix (elementwise, so that it fuses: a reduction
+    over the 3x3 axes is a loop of its own)."""
+    zero = functools.reduce(
+        jnp.logical_and, (B[..., i, j] == 0 for i in range(3) for j in range(3))
+    )
+    return jnp.where(zero.reshape(zero.shape + (1,) * (x.ndim - zero.ndim)), jnp.nan, x)
 
 
 @jax.custom_jvp
@@ -299,8 +313,32 @@ def _nearest(B):
     """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`).
     ``V`` is an output of the same run, so that a derivative needs no second one; where nothing
     is differentiated it is unused, and XLA drops it."""
-    q, V = jax.lax.stop_gradient(_by_chunks(_polar, B))
+    q, V, _ = jax.lax.stop_gradient(_by_chunks(_polar, B))
     return _top(B, q, V)
+
+
+@jax.custom_jvp
+def _top_matrix(B, q, V, Q):
+    """``Q``, the rotation of ``_top(B, q, V)`` computed by the kernel, differentiated as
+    ``_to_matrix(_top(B, q, V))``."""
+    del B, q, V
+    return Q
+
+
+@_top_matrix.defjvp
+def _top_matrix_jvp(primals, tangents):
+    from ._quaternion import _to_matrix  # its package imports this module
+
+    (B, q, V, _), (dB, _, _, _) = primals, tangents
+    return jax.jvp(lambda b: _to_matrix(_top(b, q, V)), (B,), (dB,))
+
+
+def nearest_rotation(B):
+    """The rotation matrix ``R`` maximising ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B`` (the
+    special-orthogonal polar factor), as the kernel forms it; differentiated as the matrix of
+    :func:`nearest_quaternion`. NaN where ``B`` is zero or not finite."""
+    q, V, Q = jax.lax.stop_gradient(_by_chunks(_polar, B))
+    return _nan_at_zero(B, _top_matrix(B, q, V, Q))
 
 
 def top_eigenvector(K):
@@ -410,9 +448,4 @@ def nearest_quaternion(B):
     """Scalar-last unit quaternion ``(..., 4)``, ``w >= 0``, of the rotation ``R`` maximising
     ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B``: the nearest rotation to ``B``, ``det B < 0``
     included. NaN where ``B`` is zero or not finite. Independent of the scale of ``B``."""
-    v = _nearest(B)
-    # elementwise, so that it fuses (a reduction over the 3x3 axes is a loop of its own)
-    zero = functools.reduce(
-        jnp.logical_and, (B[..., i, j] == 0 for i in range(3) for j in range(3))
-    )
-    return jnp.where(zero[..., None], jnp.nan, v)
+    return _nan_at_zero(B, _nearest(B))

@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._eigen import nearest_quaternion, pow2_scale, top_eigenvector
+from ._eigen import nearest_quaternion, nearest_rotation, pow2_scale, top_eigenvector
 from ._numerics import (
     FULL,
     as_float,
@@ -27,7 +27,7 @@ from ._numerics import (
     to_scalar_last,
     vee,
 )
-from ._quaternion import _conjugate, _multiply, _normalize, _to_matrix
+from ._quaternion import _conjugate, _multiply, _normalize
 from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
 
 ALIGN_METHODS = ("svd", "q-method")
@@ -205,8 +205,7 @@ def nined_to_matrix(x):
     """
     (x,), dt = as_float(x)
     check_shape(x, (9,), "x")
-    q = nearest_quaternion(x.reshape(*x.shape[:-1], 3, 3))
-    return _to_matrix(q).astype(dt)
+    return nearest_rotation(x.reshape(*x.shape[:-1], 3, 3)).astype(dt)
 
 
 # --- Wahba's problem --------------------------------------------------------------------

@@ -187,8 +187,8 @@ def test_chunked_batches_agree_with_one_piece(n, dtype):
     tol = 1e-12 if dtype == np.float64 else 1e-5  # on 1 - |cos|: angles of 1e-6 and 3e-3
     rng = np.random.default_rng(n)
     B = jnp.asarray(rng.standard_normal((n, 3, 3)), dtype)
-    chunked, vc = jax.jit(lambda B: _by_chunks(_polar, B))(B)
-    whole, vw = jax.jit(_polar)(B)
+    chunked, vc, _ = jax.jit(lambda B: _by_chunks(_polar, B))(B)
+    whole, vw, _ = jax.jit(_polar)(B)
     assert chunked.shape == (n, 4) and vc.shape == (n, 3, 3)
     assert np.abs(np.abs(np.sum(chunked * whole, axis=-1)) - 1).max() <= tol
     assert np.abs(np.abs(np.sum(vc * vw, axis=-2)) - 1).max() <= tol  # columns, up to sign
@@ -214,3 +214,56 @@ def test_eigh4_is_a_full_eigendecomposition(name):
     np.testing.assert_allclose(K @ E, E * lam[:, None, :], atol=1e-13 * np.abs(K).max())
     np.testing.assert_allclose(np.sort(lam), np.linalg.eigvalsh(K), atol=1e-13 * np.abs(K).max())
     assert (lam[:, 0] >= lam.max(axis=-1) - 1e-13 * np.abs(K).max()).all()  # the first is the top
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_nearest_rotation_is_the_matrix_of_nearest_quaternion(dtype):
+    """``nined_to_matrix`` returns the kernel's rotation ``Q`` itself, differentiated as the
+    matrix of the kernel's quaternion: the two agree to rounding (ties, rank deficiency and
+    ``det < 0`` included), and so do their derivatives."""
+    from rotjax._eigen import nearest_quaternion, nearest_rotation
+    from rotjax._quaternion import _to_matrix
+
+    rng = np.random.default_rng(41)
+    R = Rotation.random(64, random_state=41).as_matrix()
+    B = np.concatenate(
+        [
+            R + 0.3 * rng.standard_normal((64, 3, 3)),
+            -R,  # a triple tie
+            R * np.array([1.0, 1.0, -1.0]),  # det < 0
+            R * np.array([1.0, 0.5, 0.0]),  # rank 2
+            np.einsum("ni,nj->nij", *rng.standard_normal((2, 64, 3))),  # rank 1
+            rng.standard_normal((64, 3, 3)),
+        ]
+    ).astype(dtype)
+
+    def via_q(B):
+        return _to_matrix(nearest_quaternion(B))
+
+    Q, Qq = jax.jit(nearest_rotation)(B), jax.jit(via_q)(B)
+    assert (
+        np.abs(np.asarray(Q, np.float64) - np.asarray(Qq, np.float64)).max()
+        <= 8 * np.finfo(dtype).eps
+    )
+    if dtype == np.float64:
+        dB = rng.standard_normal(B.shape)
+        t = jax.jit(lambda B, dB: jax.jvp(nearest_rotation, (B,), (dB,))[1])(B, dB)
+        tq = jax.jit(lambda B, dB: jax.jvp(via_q, (B,), (dB,))[1])(B, dB)
+        assert np.array_equal(np.asarray(t), np.asarray(tq))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_optimal_half_turns_stable_under_rounding(dtype):
+    """At 180 degrees the sign of ``w`` is rounding noise: ``"optimal"`` gives ``w`` within
+    rounding of 0 (never negative) and the largest component positive, whatever the rounding of
+    the input (here: scalings that are not powers of two, and a transposed rounding)."""
+    axes = np.array([[0.0, 0.6, 0.8], [1.0, 0.0, 0.0], [2.0, -3.0, 6.0], [1.0, 1.0, 1.0]])
+    axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
+    R = (2 * np.einsum("ni,nj->nij", axes, axes) - np.eye(3)).astype(dtype)
+    e = np.finfo(dtype).eps
+    f = jax.jit(lambda R: rj.matrix_to_quaternion(R, method="optimal"))
+    want = np.where(axes[np.arange(4), np.abs(axes).argmax(-1)][:, None] < 0, -axes, axes)
+    for M in (R, R * dtype(1e-30), R * dtype(3.0), R * dtype(0.7), np.swapaxes(R, -1, -2)):
+        q = np.asarray(f(M), np.float64)
+        assert (q[:, 3] >= 0).all() and (q[:, 3] <= 4 * e).all()
+        assert np.abs(q[:, :3] - want).max() <= 8 * e
