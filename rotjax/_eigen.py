@@ -149,8 +149,10 @@ def _perpendicular(u):
 
 def _polar(B):
     """Scalar-last unit quaternion (``w >= 0``) of the rotation ``Q`` maximising ``tr(Q^T B)``
-    for ``(..., 3, 3)`` ``B``, the right singular vectors ``(..., 3, 3)`` (columns), and ``Q``.
-    (XLA drops the outputs a caller does not use.)
+    for ``(..., 3, 3)`` ``B``, ``Q``, and ``(V, s)``: the right singular vectors ``(..., 3, 3)``
+    (columns) and the singular values ``(..., 3)`` of ``B`` scaled by :func:`pow2_scale`, the
+    last one negative where ``det B < 0`` (``Q^T B = V diag(s) V^T``). XLA drops the outputs a
+    caller does not use.
 
     One-sided Jacobi: the columns of ``W = B V`` are rotated in pairs until orthogonal, the
     rotations accumulated in ``V``; both are rows of one ``(..., 6, 3)`` state, so each rotation
@@ -174,7 +176,7 @@ def _polar(B):
             c, s = (x[..., None] for x in _rotation(alpha, beta, gamma))
             cols[p], cols[q] = c * cols[p] - s * cols[q], s * cols[p] + c * cols[q]
             S = jnp.stack(cols, axis=-1)
-    (wa, wb, _), (va, vb, _) = (
+    (wa, wb, wc), (va, vb, _) = (
         [[S[..., i, j] for i in rows] for j in range(3)] for rows in ((0, 1, 2), (3, 4, 5))
     )
     ua = _unit_or(wa, va)  # B = 0: any rotation
@@ -202,7 +204,8 @@ def _polar(B):
     inv = jnp.where(flip, -1.0, 1.0) / jnp.sqrt(n)
     q = jnp.stack(c, axis=-1) * inv[..., None]
     q = jnp.concatenate([q[..., :3], jnp.maximum(q[..., 3:], 0.0)], axis=-1)
-    return q, S[..., 3:, :], Q
+    s = jnp.stack([_dot3(ua, wa), _dot3(ub, wb), _dot3(uc, wc)], axis=-1)
+    return q, Q, (S[..., 3:, :], s)
 
 
 def _by_chunks(fn, B):
@@ -286,7 +289,7 @@ def eigh4(K):
     equivalent 3x3 matrix; the eigenvalues are the Rayleigh quotients. A non-finite entry gives
     NaN. No derivative rule: see :func:`top_eigenvector`."""
     _check(K)
-    q, V, _ = _by_chunks(_polar, _k_to_b(K))
+    q, _, (V, _) = _by_chunks(_polar, _k_to_b(K))
     E = _half_turns(q, V)
     Ks = 0.5 * (K + jnp.swapaxes(K, -1, -2))
     return _rayleigh(Ks, E), E
@@ -302,10 +305,10 @@ def _nan_at_zero(B, x):
 
 
 @jax.custom_jvp
-def _top(B, q, V):
-    """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller with the right
-    singular vectors ``V`` of ``B``, differentiated as that function of ``B``."""
-    del B, V
+def _top(B, q, aux):
+    """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller with ``aux``, the
+    kernel's ``(V, s)`` for ``B``, differentiated as that function of ``B``."""
+    del B, aux
     return q
 
 
@@ -313,15 +316,15 @@ def _nearest(B):
     """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`).
     ``V`` is an output of the same run, so that a derivative needs no second one; where nothing
     is differentiated it is unused, and XLA drops it."""
-    q, V, _ = jax.lax.stop_gradient(_by_chunks(_polar, B))
-    return _top(B, q, V)
+    q, _, aux = jax.lax.stop_gradient(_by_chunks(_polar, B))
+    return _top(B, q, aux)
 
 
 @jax.custom_jvp
-def _top_matrix(B, q, V, Q):
-    """``Q``, the rotation of ``_top(B, q, V)`` computed by the kernel, differentiated as
-    ``_to_matrix(_top(B, q, V))``."""
-    del B, q, V
+def _top_matrix(B, q, aux, Q):
+    """``Q``, the rotation of ``_top(B, q, aux)`` computed by the kernel, differentiated as
+    ``_to_matrix(_top(B, q, aux))``."""
+    del B, q, aux
     return Q
 
 
@@ -329,16 +332,16 @@ def _top_matrix(B, q, V, Q):
 def _top_matrix_jvp(primals, tangents):
     from ._quaternion import _to_matrix  # its package imports this module
 
-    (B, q, V, _), (dB, _, _, _) = primals, tangents
-    return jax.jvp(lambda b: _to_matrix(_top(b, q, V)), (B,), (dB,))
+    (B, q, aux, _), (dB, _, _, _) = primals, tangents
+    return jax.jvp(lambda b: _to_matrix(_top(b, q, aux)), (B,), (dB,))
 
 
 def nearest_rotation(B):
     """The rotation matrix ``R`` maximising ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B`` (the
     special-orthogonal polar factor), as the kernel forms it; differentiated as the matrix of
     :func:`nearest_quaternion`. NaN where ``B`` is zero or not finite."""
-    q, V, Q = jax.lax.stop_gradient(_by_chunks(_polar, B))
-    return _nan_at_zero(B, _top_matrix(B, q, V, Q))
+    q, Q, aux = jax.lax.stop_gradient(_by_chunks(_polar, B))
+    return _nan_at_zero(B, _top_matrix(B, q, aux, Q))
 
 
 def top_eigenvector(K):
@@ -395,20 +398,25 @@ def _top_jvp(primals, tangents):
     # in K, so its derivative is the second derivative of v. Its only gap terms are to the top
     # eigenvalue: lower ties (exact rotations, identical inputs to a mean) do not appear. A gap
     # to the top below TIE_ULPS eps |K| is a tie: X is 0 there. K = davenport_k(B) scaled by an
-    # exact power of two (v does not depend on the scale).
-    (B, qe, V), (dB, _, _) = primals, tangents
+    # exact power of two (v does not depend on the scale), as in the kernel: its eigenvalues
+    # are sum(s) (top) and sum(s) - 2 (s_k + s_l) (half turn about v_j) for the kernel's s.
+    (B, qe, aux), (dB, _, _) = primals, tangents
+    V, s = aux
     Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor
     K, dK = davenport_k(Bs), davenport_k(dBs)
     E = _half_turns(qe, V)
-    lam_all = jax.lax.stop_gradient(_rayleigh(K, E))
-    v = _top(B, qe, V)
+    v = _top(B, qe, aux)
     lam = _dot(v, _mv(K, v))[..., 0]
-    top = lam_all[..., :1]
-    scale = max_abs(*jnp.moveaxis(lam_all, -1, 0))[..., None]
+    s0, s1, s2 = (s[..., i] for i in range(3))
+    gaps = [2.0 * (s1 + s2), 2.0 * (s0 + s2), 2.0 * (s0 + s1)]
+    top = s0 + s1 + s2
+    scale = max_abs(top, *(top - g for g in gaps))[..., None]
     c = jnp.where(scale > 0, scale, 1.0)
     tol = TIE_ULPS * eps(K.dtype) * scale
     # X's eigenvalues: 1/c along v (column 0 of E), 1/gap_j along the others.
-    inv_mu = jnp.concatenate([jnp.zeros_like(top), safe_div(1.0, top - lam_all[..., 1:], tol)], -1)
+    inv_mu = jnp.concatenate(
+        [jnp.zeros_like(scale), safe_div(1.0, jnp.stack(gaps, axis=-1), tol)], -1
+    )
 
     def X(x):
         return _mv(E, inv_mu * _mtv(E, x)) + qe * _dot(qe, x) / c

@@ -187,8 +187,8 @@ def test_chunked_batches_agree_with_one_piece(n, dtype):
     tol = 1e-12 if dtype == np.float64 else 1e-5  # on 1 - |cos|: angles of 1e-6 and 3e-3
     rng = np.random.default_rng(n)
     B = jnp.asarray(rng.standard_normal((n, 3, 3)), dtype)
-    chunked, vc, _ = jax.jit(lambda B: _by_chunks(_polar, B))(B)
-    whole, vw, _ = jax.jit(_polar)(B)
+    chunked, _, (vc, _) = jax.jit(lambda B: _by_chunks(_polar, B))(B)
+    whole, _, (vw, _) = jax.jit(_polar)(B)
     assert chunked.shape == (n, 4) and vc.shape == (n, 3, 3)
     assert np.abs(np.abs(np.sum(chunked * whole, axis=-1)) - 1).max() <= tol
     assert np.abs(np.abs(np.sum(vc * vw, axis=-2)) - 1).max() <= tol  # columns, up to sign
@@ -267,3 +267,29 @@ def test_optimal_half_turns_stable_under_rounding(dtype):
         q = np.asarray(f(M), np.float64)
         assert (q[:, 3] >= 0).all() and (q[:, 3] <= 4 * e).all()
         assert np.abs(q[:, :3] - want).max() <= 8 * e
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_kernel_singular_values_give_the_eigenvalues(dtype):
+    """The derivative rule takes the eigenvalues of ``K`` from the kernel's signed singular
+    values ``s`` of the prescaled ``B``: ``sum(s)`` and ``sum(s) - 2 (s_k + s_l)``."""
+    from rotjax._eigen import _polar, davenport_k, pow2_scale
+
+    rng = np.random.default_rng(43)
+    R = Rotation.random(48, random_state=43).as_matrix()
+    B = np.concatenate(
+        [
+            rng.standard_normal((48, 3, 3)),
+            R * np.array([1.0, 1.0, -1.0]),  # det < 0
+            R * np.array([1.0, 0.5, 0.0]),  # rank 2
+            -R,  # a triple tie
+            1e-20 * (R + 0.1 * rng.standard_normal((48, 3, 3))),
+        ]
+    ).astype(dtype)
+    _, _, (_, s) = jax.jit(_polar)(B)
+    s = np.asarray(s, np.float64)
+    t = s.sum(-1, keepdims=True)
+    lam = np.sort(np.concatenate([t, t - 2 * (t - s)], -1), -1)
+    K = np.asarray(davenport_k(pow2_scale(jnp.asarray(B), (-2, -1))), np.float64)
+    ref = np.linalg.eigvalsh(K)
+    assert np.abs(lam - ref).max() <= 16 * np.finfo(dtype).eps * np.abs(ref).max()
