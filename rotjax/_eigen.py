@@ -314,8 +314,8 @@ def _top(B, q, aux):
 
 def _nearest(B):
     """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`).
-    ``V`` is an output of the same run, so that a derivative needs no second one; where nothing
-    is differentiated it is unused, and XLA drops it."""
+    The rule's ``(V, s)`` are outputs of the same run, so that a derivative needs no second one;
+    where nothing is differentiated they are unused, and XLA drops them."""
     q, _, aux = jax.lax.stop_gradient(_by_chunks(_polar, B))
     return _top(B, q, aux)
 
