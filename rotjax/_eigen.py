@@ -98,7 +98,8 @@ def _rotation(app, aqq, apq):
     (2 a_pq)`` (Golub & Van Loan 8.5.2), written ``t = 2 a_pq / (d + sign(d) r)``, ``d = a_qq -
     a_pp``, ``r = sqrt(d^2 + 4 a_pq^2)``: it gives ``a_pp' = a_pp - t a_pq``, larger than
     ``a_qq'`` where ``d < 0``. Elsewhere the rotation is by ``theta + pi/2``, ``t = -(d + r) /
-    (2 a_pq)``, which swaps the two results (``-inf``, capped, for ``a_pq = 0 < d``: a swap).
+    (2 a_pq)``, which swaps the two results; ``|t|`` is capped at ``1 / eps^2`` (a swap to below
+    the rounding level), which is also ``t`` for ``a_pq = 0 < d``.
 
     Each choice is made inside the one quotient ``t``, and ``c`` and ``s`` come from it: XLA
     recomputes cheap expressions in every loop that uses them, and a sign of ``d`` taken twice
@@ -112,6 +113,7 @@ def _rotation(app, aqq, apq):
     zero = den == 0  # a_pq = 0 <= d: swap (0 = d = r: nothing to do)
     big = 1.0 / eps(app.dtype) ** 2  # c ~ eps^2: a swap to well below the rounding level
     t = jnp.where(zero, jnp.where(num == 0, 0.0, -big), num) / jnp.where(zero, 1.0, den)
+    t = jnp.clip(t, -big, big)  # a_pq tiny but not 0: t^2 must not overflow (c = s = 0)
     c = jnp.sqrt(1.0 / (1.0 + t * t))
     return c, t * c
 

@@ -293,3 +293,38 @@ def test_kernel_singular_values_give_the_eigenvalues(dtype):
     K = np.asarray(davenport_k(pow2_scale(jnp.asarray(B), (-2, -1))), np.float64)
     ref = np.linalg.eigvalsh(K)
     assert np.abs(lam - ref).max() <= 16 * np.finfo(dtype).eps * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_jacobi_rotation_with_a_tiny_off_diagonal(dtype):
+    """Equal column norms and an off-diagonal entry far below the rounding level (rotations at
+    gimbal lock, in a batch) ask for a swap with ``|tan theta|`` beyond the square root of the
+    largest float: the rotation must stay a rotation (``c`` and ``s`` not both 0)."""
+    from rotjax._eigen import _rotation
+
+    tiny = np.finfo(dtype).tiny
+    app = np.array([1.0, 1.0, 1.0, 1.0, 2.0], dtype)
+    aqq = np.array([1.0 + 4 * np.finfo(dtype).eps, 1.0, 2.0, 1.0, 1.0], dtype)
+    apq = np.array([1e3 * tiny, 1e3 * tiny, 0.0, 0.0, 1e3 * tiny], dtype)
+    c, s = (np.asarray(x, np.float64) for x in jax.jit(_rotation)(app, aqq, apq))
+    assert np.allclose(c * c + s * s, 1.0, atol=4 * np.finfo(dtype).eps)
+    # the larger diagonal entry ends first: a swap where a_qq > a_pp
+    alpha = c * c * app - 2 * c * s * apq + s * s * aqq
+    beta = s * s * app + 2 * c * s * apq + c * c * aqq
+    assert (alpha >= beta * (1 - 4 * np.finfo(dtype).eps)).all()
+
+
+def test_gimbal_lock_matrices_in_a_batch():
+    """The benchmark's gimbal-lock rotations (every sequence, float32): exact to a few eps in a
+    batch, where XLA's vectorised loops round differently from a single matrix."""
+    from rotjax._bench import accuracy as A
+    from rotjax._bench.runner import SEQS
+
+    acc = A.Accuracy(np.random.default_rng(99), 96, 8, "float32", SEQS)
+    M = np.asarray(acc.msets["gimbal"]).astype(np.float32)
+    for f in (
+        lambda R: rj.quaternion_to_matrix(rj.matrix_to_quaternion(R, method="optimal")),
+        lambda R: rj.nined_to_matrix(R.reshape(-1, 9)),
+    ):
+        out = np.asarray(jax.jit(f)(M), np.float64)
+        assert np.abs(out - M.astype(np.float64)).max() <= 8 * np.finfo(np.float32).eps
