@@ -150,8 +150,9 @@ def _perpendicular(u):
 
 
 def _polar(B):
-    """Scalar-last unit quaternion (``w >= 0``) of the rotation ``Q`` maximising ``tr(Q^T B)``
-    for ``(..., 3, 3)`` ``B``, ``Q``, and ``(V, s)``: the right singular vectors ``(..., 3, 3)``
+    """Scalar-last unit quaternion (``w >= 0``, or ``|w| <= 4 eps`` and the largest component
+    positive) of the rotation ``Q`` maximising ``tr(Q^T B)`` for ``(..., 3, 3)`` ``B``, ``Q``,
+    and ``(V, s)``: the right singular vectors ``(..., 3, 3)``
     (columns) and the singular values ``(..., 3)`` of ``B`` scaled by :func:`pow2_scale`, the
     last one negative where ``det B < 0`` (``Q^T B = V diag(s) V^T``). XLA drops the outputs a
     caller does not use.
@@ -193,8 +194,8 @@ def _polar(B):
     )
     # Shepperd's extraction: the column of K = 4 q q^T with the largest diagonal, normalised to
     # w >= 0 (an argmax, and the sign inside the one quotient, for one choice across the four
-    # components). Within rounding of 180 degrees (|w| <= 4 eps) w is 0 and the selected
-    # component positive, so that rounding of the input cannot flip the result.
+    # components). Within rounding of 180 degrees (|w| <= 4 eps) the selected component is
+    # positive instead, so that rounding of the input cannot flip the result.
     cols, diag = _k4_columns(Q)
     k = jnp.argmax(jnp.stack(diag, axis=-1), axis=-1)
     c = [
@@ -205,7 +206,6 @@ def _polar(B):
     flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
     inv = jnp.where(flip, -1.0, 1.0) / jnp.sqrt(n)
     q = jnp.stack(c, axis=-1) * inv[..., None]
-    q = jnp.concatenate([q[..., :3], jnp.maximum(q[..., 3:], 0.0)], axis=-1)
     s = jnp.stack([_dot3(ua, wa), _dot3(ub, wb), _dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)
 
@@ -350,10 +350,11 @@ def top_eigenvector(K):
     """Unit eigenvector ``(..., 4)`` of the largest eigenvalue of the symmetric part of a
     ``(..., 4, 4)`` ``K``.
 
-    The last component is ``>= 0``. Where the top eigenvalue is simple the result is accurate to
-    a few eps divided by the relative gap to the next one, at any finite scale of ``K``; a
-    non-finite entry gives NaN; a multiple of ``I`` gives a unit vector (every vector is an
-    eigenvector).
+    The last component is ``>= 0`` (within ``4 eps`` of 0 the largest component is positive
+    instead, so that rounding does not flip the sign). Where the top eigenvalue is simple the
+    result is accurate to a few eps divided by the relative gap to the next one, at any finite
+    scale of ``K``; a non-finite entry gives NaN; a multiple of ``I`` gives a unit vector (every
+    vector is an eigenvector).
 
     Derivative: exact while the top eigenvalue is simple, and differentiable again (second
     derivatives exact there). At a tie with the top eigenvalue the component of the derivative
@@ -455,7 +456,8 @@ def davenport_k(B):
 
 
 def nearest_quaternion(B):
-    """Scalar-last unit quaternion ``(..., 4)``, ``w >= 0``, of the rotation ``R`` maximising
+    """Scalar-last unit quaternion ``(..., 4)``, ``w >= 0`` (see :func:`top_eigenvector` for
+    ``|w| <= 4 eps``), of the rotation ``R`` maximising
     ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B``: the nearest rotation to ``B``, ``det B < 0``
     included. NaN where ``B`` is zero or not finite. Independent of the scale of ``B``."""
     return _nan_at_zero(B, _nearest(B))

@@ -231,7 +231,8 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
         scalar_first: return ``(w, x, y, z)``.
 
     Returns:
-        ``(..., 4)`` unit quaternion of ``R``, with ``w >= 0``. NaN where all weights (or all
+        ``(..., 4)`` unit quaternion of ``R``, with ``w >= 0`` (``|w| <= 4 eps`` at 180 degrees,
+        as in ``matrix_to_quaternion``). NaN where all weights (or all
         vectors) are zero, or an entry is not finite. The result does not depend on the scale of
         ``a``, ``b`` or the weights (e.g. magnetometer data in tesla or microtesla).
 
@@ -294,7 +295,8 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
         scalar_first: quaternions (input and output) are ``(w, x, y, z)``.
 
     Returns:
-        ``(..., 4)`` unit quaternion with ``w >= 0``.
+        ``(..., 4)`` unit quaternion with ``w >= 0`` (``|w| <= 4 eps`` at 180 degrees, as in
+        ``matrix_to_quaternion``).
 
     Raises:
         ValueError: for an empty set (``N = 0``) or mismatched shapes.

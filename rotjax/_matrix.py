@@ -276,7 +276,8 @@ def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False
 
     Returns:
         ``(..., 4)`` unit quaternion with ``w >= 0`` (at exactly 180 degrees, ``w = 0`` and the
-        sign is that of the selected component).
+        sign is that of the selected component; with ``"optimal"``, wherever ``|w| <= 4 eps``,
+        so that the rounding of the input does not flip the sign).
 
     Note:
         *Scale.* ``K`` is built homogeneous (its diagonal ``1 = |q|^2`` replaced by
