@@ -232,9 +232,9 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
 
     Returns:
         ``(..., 4)`` unit quaternion of ``R``, with ``w >= 0`` (``|w| <= 4 eps`` at 180 degrees,
-        as in ``matrix_to_quaternion``). NaN where all weights (or all
-        vectors) are zero, or an entry is not finite. The result does not depend on the scale of
-        ``a``, ``b`` or the weights (e.g. magnetometer data in tesla or microtesla).
+        as in ``matrix_to_quaternion``). NaN where all weights (or all vectors) are zero, or an
+        entry is not finite. The result does not depend on the scale of ``a``, ``b`` or the
+        weights (e.g. magnetometer data in tesla or microtesla).
 
     Raises:
         ValueError: for shapes other than ``(..., N, 3)`` or an unknown ``method``.
