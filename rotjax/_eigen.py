@@ -279,25 +279,6 @@ def _half_turns(q, V):
     return jnp.stack(cols, axis=-1)
 
 
-def _rayleigh(K, E):
-    """``e_j^T K e_j`` for each column ``e_j`` of ``E``, shape ``(..., 4)``."""
-    return sum(
-        E[..., i, :] * sum(K[..., i, k, None] * E[..., k, :] for k in range(4)) for i in range(4)
-    )
-
-
-def eigh4(K):
-    """Eigenvalues ``(..., 4)`` (unordered; the first the largest) and eigenvectors
-    ``(..., 4, 4)`` (columns) of the symmetric part of ``K``, from the kernel's SVD of the
-    equivalent 3x3 matrix; the eigenvalues are the Rayleigh quotients. A non-finite entry gives
-    NaN. No derivative rule: see :func:`top_eigenvector`."""
-    _check(K)
-    q, _, (V, _) = _by_chunks(_polar, _k_to_b(K))
-    E = _half_turns(q, V)
-    Ks = 0.5 * (K + jnp.swapaxes(K, -1, -2))
-    return _rayleigh(Ks, E), E
-
-
 def _nan_at_zero(B, x):
     """``x`` with NaN where ``B`` is the zero matrix (elementwise, so that it fuses: a reduction
     over the 3x3 axes is a loop of its own)."""

@@ -201,19 +201,27 @@ def test_chunked_batches_agree_with_one_piece(n, dtype):
 
 
 @pytest.mark.parametrize("name", ["gaussian", "sigma=0.3", "det<0", "near-tie"])
-def test_eigh4_is_a_full_eigendecomposition(name):
-    """The derivative rule's eigenvectors: the top one and its compositions with half turns
-    about the right singular vectors of B are orthonormal, and K E = E diag(lambda)."""
-    from rotjax._eigen import eigh4
+def test_the_rules_eigendecomposition(name):
+    """The derivative rule's eigenvectors and eigenvalues, from one kernel run on the ``B`` of
+    ``K``: the top eigenvector and its compositions with half turns about the right singular
+    vectors (:func:`_half_turns`) are orthonormal, with eigenvalues ``sum(s)`` and
+    ``sum(s) - 2 (s_k + s_l)`` of the prescaled ``K(B)``, the first the largest."""
+    from rotjax._eigen import _half_turns, _k_to_b, _polar, davenport_k, pow2_scale
 
-    K = CASES[name]
-    lam, E = map(np.asarray, jax.jit(eigh4)(jnp.asarray(K)))
+    B = _k_to_b(jnp.asarray(CASES[name]))
+    q, _, (V, s) = jax.jit(_polar)(B)
+    E = np.asarray(_half_turns(q, V))
+    K = np.asarray(davenport_k(pow2_scale(B, (-2, -1))))
+    s = np.asarray(s)
+    t = s.sum(-1, keepdims=True)
+    lam = np.concatenate([t, t - 2 * (t - s)], -1)  # column j + 1: the half turn about v_j
+    scale = np.abs(K).max()
     np.testing.assert_allclose(
         np.swapaxes(E, -1, -2) @ E, np.broadcast_to(np.eye(4), E.shape), atol=1e-14
     )
-    np.testing.assert_allclose(K @ E, E * lam[:, None, :], atol=1e-13 * np.abs(K).max())
-    np.testing.assert_allclose(np.sort(lam), np.linalg.eigvalsh(K), atol=1e-13 * np.abs(K).max())
-    assert (lam[:, 0] >= lam.max(axis=-1) - 1e-13 * np.abs(K).max()).all()  # the first is the top
+    np.testing.assert_allclose(K @ E, E * lam[:, None, :], atol=1e-13 * scale)
+    np.testing.assert_allclose(np.sort(lam), np.linalg.eigvalsh(K), atol=1e-13 * scale)
+    assert (lam[:, 0] >= lam.max(axis=-1) - 1e-13 * scale).all()
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
