@@ -128,8 +128,10 @@ def _cross3(x, y):
 
 
 def _unit_or(w, fallback):
-    """``w / |w|``, or ``fallback`` where ``|w| = 0``."""
+    """``w / |w|``, or ``fallback`` where ``|w| = 0`` (NaN there for ``fallback=None``)."""
     n = _dot3(w, w)
+    if fallback is None:
+        return [x * jnp.sqrt(1.0 / n) for x in w]  # 0 * inf
     ok = n > 0
     inv = jnp.sqrt(1.0 / jnp.where(ok, n, 1.0))
     return [jnp.where(ok, x * inv, f) for x, f in zip(w, fallback, strict=True)]
@@ -150,13 +152,13 @@ def _perpendicular(u):
     return [x * inv for x in p]
 
 
-def _polar(B):
+def _polar(B, nan_at_zero=True):
     """Scalar-last unit quaternion (``w >= 0``, or ``|w| <= 4 eps`` and the largest component
     positive) of the rotation ``Q`` maximising ``tr(Q^T B)`` for ``(..., 3, 3)`` ``B``, ``Q``,
     and ``(V, s)``: the right singular vectors ``(..., 3, 3)``
     (columns) and the singular values ``(..., 3)`` of ``B`` scaled by :func:`pow2_scale`, the
     last one negative where ``det B < 0`` (``Q^T B = V diag(s) V^T``). XLA drops the outputs a
-    caller does not use.
+    caller does not use. ``B = 0`` gives NaN, or with ``nan_at_zero=False`` some rotation.
 
     One-sided Jacobi: the columns of ``W = B V`` are rotated in pairs until orthogonal, the
     rotations accumulated in ``V``; both are rows of one ``(..., 6, 3)`` state, so each rotation
@@ -183,7 +185,9 @@ def _polar(B):
     (wa, wb, wc), (va, vb, _) = (
         [[S[..., i, j] for i in rows] for j in range(3)] for rows in ((0, 1, 2), (3, 4, 5))
     )
-    ua = _unit_or(wa, va)  # B = 0: any rotation
+    # The largest column is 0 only for B = 0: the scaled B has an entry of at least 1/2, and
+    # the rotations keep its Frobenius norm.
+    ua = _unit_or(wa, None if nan_at_zero else va)
     ub = _unit_or(wb, _perpendicular(ua))  # rank 1: any rotation taking v_a to u_a
     uc, vc = _cross3(ua, ub), _cross3(va, vb)
     Q = jnp.stack(
@@ -279,15 +283,6 @@ def _half_turns(q, V):
     return jnp.stack(cols, axis=-1)
 
 
-def _nan_at_zero(B, x):
-    """``x`` with NaN where ``B`` is the zero matrix (elementwise, so that it fuses: a reduction
-    over the 3x3 axes is a loop of its own)."""
-    zero = functools.reduce(
-        jnp.logical_and, (B[..., i, j] == 0 for i in range(3) for j in range(3))
-    )
-    return jnp.where(zero.reshape(zero.shape + (1,) * (x.ndim - zero.ndim)), jnp.nan, x)
-
-
 @jax.custom_jvp
 def _top(B, q, aux):
     """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller with ``aux``, the
@@ -296,11 +291,12 @@ def _top(B, q, aux):
     return q
 
 
-def _nearest(B):
+def _nearest(B, nan_at_zero=True):
     """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`).
     The rule's ``(V, s)`` are outputs of the same run, so that a derivative needs no second one;
     where nothing is differentiated they are unused, and XLA drops them."""
-    q, _, aux = jax.lax.stop_gradient(_by_chunks(_polar, B))
+    polar = functools.partial(_polar, nan_at_zero=nan_at_zero)
+    q, _, aux = jax.lax.stop_gradient(_by_chunks(polar, B))
     return _top(B, q, aux)
 
 
@@ -325,7 +321,7 @@ def nearest_rotation(B):
     special-orthogonal polar factor), as the kernel forms it; differentiated as the matrix of
     :func:`nearest_quaternion`. NaN where ``B`` is zero or not finite."""
     q, Q, aux = jax.lax.stop_gradient(_by_chunks(_polar, B))
-    return _nan_at_zero(B, _top_matrix(B, q, aux, Q))
+    return _top_matrix(B, q, aux, Q)
 
 
 def top_eigenvector(K):
@@ -343,7 +339,7 @@ def top_eigenvector(K):
     along the tied eigenspace, where the answer is not unique, is 0.
     """
     _check(K)
-    return _nearest(_k_to_b(K))
+    return _nearest(_k_to_b(K), nan_at_zero=False)
 
 
 # The derivative rule's small products are sums of per-element terms, not ``jnp.sum`` over a
@@ -442,4 +438,4 @@ def nearest_quaternion(B):
     ``|w| <= 4 eps``), of the rotation ``R`` maximising
     ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B``: the nearest rotation to ``B``, ``det B < 0``
     included. NaN where ``B`` is zero or not finite. Independent of the scale of ``B``."""
-    return _nan_at_zero(B, _nearest(B))
+    return _nearest(B)

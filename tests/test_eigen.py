@@ -88,6 +88,17 @@ def test_bad_input_gives_nan():
     assert np.isnan(rj.nined_to_matrix(x)).all()  # inf in [0], the zero matrix in [1]
     assert np.isnan(rj.align_vectors(jnp.ones((3, 3)), jnp.ones((3, 3)), jnp.zeros(3))).all()
     assert np.isnan(rj.quaternion_mean(jnp.ones((3, 4)), jnp.zeros(3))).all()
+    # in a batch run in chunks, the NaN stays in its own element
+    B = np.broadcast_to(np.eye(3), (2**11 + 3, 3, 3)).copy()
+    B[5], B[2**10 + 1, 1, 2] = 0.0, np.inf
+    bad = np.zeros(len(B), bool)
+    bad[[5, 2**10 + 1]] = True
+    for f in (
+        lambda B: rj.matrix_to_quaternion(B, method="optimal"),
+        lambda B: rj.nined_to_matrix(B.reshape(-1, 9)),
+    ):
+        out = np.asarray(jax.jit(f)(jnp.asarray(B))).reshape(len(B), -1)
+        assert np.isnan(out[bad]).all() and np.isfinite(out[~bad]).all()
     with pytest.raises(ValueError, match="empty"):
         rj.quaternion_mean(jnp.ones((0, 4)))
 
