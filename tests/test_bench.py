@@ -213,19 +213,15 @@ def test_quick_benchmark_writes_json(tmp_path):
 def test_copy_baseline_at_a_bandwidth_bound_batch(tmp_path):
     """At 2^20 rotations (past the caches) quaternion_to_matrix, which writes 9 floats per
     rotation, runs at a sane fraction of the copy kernel that moves the same bytes: a copy
-    kernel doing more than a copy lets some row beat it by far, one doing less leaves even the
-    fastest row far below it. (The lower bound is on the fastest row per dtype: a slower
-    wrapper's row, e.g. ``Rotation``'s, measured in a few quick rounds beside another test
-    process, can fall below it by noise alone.)"""
+    kernel doing more or less than a copy moves this ratio out of range."""
     args = ["--quick", "--out", str(tmp_path), "--ops", "quaternion_to_matrix"]
     assert cli.main([*args, "--log2-batch", "20"]) == 0
     _, rows = R.load(tmp_path / "bench.json")
     copy = [r for r in rows if r["impl"] == "copy"]
     assert {r["dtype"] for r in copy} == {"float32", "float64"}
-    for dt in ("float32", "float64"):
-        ratios = [r["vs_copy"] for r in rows if r["impl"] == "rotjax" and r["dtype"] == dt]
-        assert ratios and max(ratios) <= 1.5, (dt, ratios)
-        assert max(ratios) >= 0.05, (dt, ratios)
+    for r in rows:
+        if r["impl"] == "rotjax":
+            assert 0.05 <= r["vs_copy"] <= 1.5, r
 
 
 def test_copy_kernel_reads_every_input_and_writes_the_output_width():
