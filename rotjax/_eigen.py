@@ -291,12 +291,17 @@ def _top(B, q, aux):
     return q
 
 
-def _nearest(B, nan_at_zero=True):
-    """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`).
-    The rule's ``(V, s)`` are outputs of the same run, so that a derivative needs no second one;
-    where nothing is differentiated they are unused, and XLA drops them."""
+def _run(B, nan_at_zero=True):
+    """The kernel's ``(q, Q, (V, s))`` for ``B`` (:func:`_polar`, by chunks), as constants: the
+    derivative rules take ``(V, s)`` from this same run, so that a derivative needs no second
+    one; where nothing is differentiated they are unused, and XLA drops them."""
     polar = functools.partial(_polar, nan_at_zero=nan_at_zero)
-    q, _, aux = jax.lax.stop_gradient(_by_chunks(polar, B))
+    return jax.lax.stop_gradient(_by_chunks(polar, B))
+
+
+def _nearest(B, nan_at_zero=True):
+    """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`)."""
+    q, _, aux = _run(B, nan_at_zero)
     return _top(B, q, aux)
 
 
@@ -320,7 +325,7 @@ def nearest_rotation(B):
     """The rotation matrix ``R`` maximising ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B`` (the
     special-orthogonal polar factor), as the kernel forms it; differentiated as the matrix of
     :func:`nearest_quaternion`. NaN where ``B`` is zero or not finite."""
-    q, Q, aux = jax.lax.stop_gradient(_by_chunks(_polar, B))
+    q, Q, aux = _run(B)
     return _top_matrix(B, q, aux, Q)
 
 
