@@ -365,3 +365,34 @@ def test_kernel_converges_on_many_noisy_matrices(scale, noise, dtype):
     rho = np.einsum("ni,ni->n", v, Kv)
     res = np.linalg.norm(Kv - rho[:, None] * v, axis=-1) / np.abs(K).max(axis=(-2, -1))
     assert res.max() <= 16 * np.finfo(dtype).eps
+
+
+def test_rules_equal_jax_derivative_of_the_kernel_code():
+    """The derivative rules of ``nearest_quaternion`` and ``nearest_rotation`` equal JAX's own
+    derivative of the forward code (the Jacobi sweeps, the rotation from the columns and the
+    extraction, differentiated by autodiff), first and second order, off ties: noisy
+    rotations, ``det < 0``, random and scaled matrices."""
+    from rotjax._eigen import _polar, nearest_quaternion, nearest_rotation
+
+    rng = np.random.default_rng(53)
+    R = Rotation.random(4, random_state=53).as_matrix()
+    Bs = [
+        R[0] + 0.3 * rng.standard_normal((3, 3)),
+        R[1] * np.array([1.0, 1.0, -1.0]) + 0.1 * rng.standard_normal((3, 3)),
+        rng.standard_normal((3, 3)),
+        1e-5 * (R[3] + 0.1 * rng.standard_normal((3, 3))),
+    ]
+    pairs = (
+        (nearest_quaternion, lambda b: _polar(b)[0]),
+        (nearest_rotation, lambda b: _polar(b)[1]),
+    )
+    for B in map(jnp.asarray, Bs):
+        d1, d2 = (jnp.asarray(rng.standard_normal((3, 3))) for _ in range(2))
+        for rule, code in pairs:
+            t, t_code = (jax.jvp(f, (B,), (d1,))[1] for f in (rule, code))
+            h, h_code = (
+                jax.jvp(lambda b, f=f: jax.jvp(f, (b,), (d1,))[1], (B,), (d2,))[1]
+                for f in (rule, code)
+            )
+            assert np.abs(t - t_code).max() <= 1e-12 * np.abs(t_code).max()
+            assert np.abs(h - h_code).max() <= 1e-10 * np.abs(h_code).max()
