@@ -12,7 +12,13 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._eigen import nearest_quaternion, nearest_rotation, pow2_scale, top_eigenvector
+from ._eigen import (
+    _UNROLL_MAX,
+    nearest_quaternion,
+    nearest_rotation,
+    pow2_scale,
+    top_eigenvector,
+)
 from ._numerics import (
     FULL,
     as_float,
@@ -31,6 +37,21 @@ from ._quaternion import _conjugate, _multiply, _normalize
 from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
 
 ALIGN_METHODS = ("svd", "q-method")
+
+
+def _sum_outer(x, y):
+    """``sum_n x_n y_n^T`` ``(..., p, r)`` for ``(..., N, p)`` and ``(..., N, r)``. For a few
+    vectors each entry is a sum of products, all in one loop over the batch (XLA:CPU runs a
+    batched ``dot`` of such small matrices several times slower); for many, an ``einsum``."""
+    n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
+    if n * max(p, r) > _UNROLL_MAX:
+        return jnp.einsum("...ni,...nj->...ij", x, y, precision=FULL)
+    batch = jnp.broadcast_shapes(x.shape[:-2], y.shape[:-2])
+    x, y = jnp.broadcast_to(x, batch + x.shape[-2:]), jnp.broadcast_to(y, batch + y.shape[-2:])
+    rows = [
+        [sum(x[..., k, i] * y[..., k, j] for k in range(n)) for j in range(r)] for i in range(p)
+    ]
+    return jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def _mT(x):
@@ -272,7 +293,7 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
     # nor overflows; the rotation does not depend on these scales.
     a = pow2_scale(a, (-2, -1))
     b = pow2_scale(b, (-2, -1))
-    B = jnp.einsum("...ni,...nj->...ij", a, b, precision=FULL)
+    B = _sum_outer(a, b)
     q = nearest_quaternion(B)
     return from_scalar_last(q, scalar_first).astype(dt)  # w >= 0
 
@@ -322,7 +343,7 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
     if weights is not None and (weights.ndim < 1 or weights.shape[-1] != q.shape[-2]):
         raise ValueError(f"weights: expected shape (..., {q.shape[-2]}), got {weights.shape}")
     qw = q if weights is None else q * pow2_scale(weights, (-1,))[..., None]
-    M = jnp.einsum("...ni,...nj->...ij", qw, q, precision=FULL)
+    M = _sum_outer(qw, q)
     v = top_eigenvector(M)
     if weights is not None:
         v = jnp.where(jnp.all(weights == 0, axis=-1, keepdims=True), jnp.nan, v)
