@@ -39,19 +39,32 @@ from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
 ALIGN_METHODS = ("svd", "q-method")
 
 
+def _einsum_outer(x, y):
+    return jnp.einsum("...ni,...nj->...ij", x, y, precision=FULL)
+
+
+@jax.custom_jvp
 def _sum_outer(x, y):
     """``sum_n x_n y_n^T`` ``(..., p, r)`` for ``(..., N, p)`` and ``(..., N, r)``. For a few
     vectors each entry is a sum of products, all in one loop over the batch (XLA:CPU runs a
-    batched ``dot`` of such small matrices several times slower); for many, an ``einsum``."""
+    batched ``dot`` of such small matrices several times slower); for many, an ``einsum``.
+    The derivative is the product rule in ``einsum``s: the transpose of the per-entry slices
+    would be one pass over the data per entry and vector."""
     n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
     if n * max(p, r) > _UNROLL_MAX:
-        return jnp.einsum("...ni,...nj->...ij", x, y, precision=FULL)
+        return _einsum_outer(x, y)
     batch = jnp.broadcast_shapes(x.shape[:-2], y.shape[:-2])
     x, y = jnp.broadcast_to(x, batch + x.shape[-2:]), jnp.broadcast_to(y, batch + y.shape[-2:])
     rows = [
         [sum(x[..., k, i] * y[..., k, j] for k in range(n)) for j in range(r)] for i in range(p)
     ]
     return jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
+
+
+@_sum_outer.defjvp
+def _sum_outer_jvp(primals, tangents):
+    (x, y), (dx, dy) = primals, tangents
+    return _sum_outer(x, y), _einsum_outer(dx, y) + _einsum_outer(x, dy)
 
 
 def _mT(x):
@@ -293,7 +306,7 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
     # nor overflows; the rotation does not depend on these scales.
     a = pow2_scale(a, (-2, -1))
     b = pow2_scale(b, (-2, -1))
-    B = _sum_outer(a, b)
+    B = _einsum_outer(a, b)
     q = nearest_quaternion(B)
     return from_scalar_last(q, scalar_first).astype(dt)  # w >= 0
 

@@ -248,6 +248,44 @@ def test_align_broadcasts_like_vmap(method, shape):
     assert_close(batched.reshape(n, 4), looped, atol=1e-13)
 
 
+# The mean's matrix is formed by elementwise sums up to 16 quaternions, by an einsum beyond:
+# both sides of the switch.
+@pytest.mark.parametrize("n", [2, 16, 17, 300])
+def test_align_and_mean_any_number_of_vectors(n):
+    a, b, w, _ = wahba_problem(n, 40 + n, noise=0.2)
+    assert_same_rotation(rj.align_vectors(a, b, w), scipy_align(a, b, w), atol=1e-13)
+    q = random_quaternions(n, 41 + n)
+    want = Rotation.from_quat(q).mean(w).as_quat()
+    assert_same_rotation(rj.quaternion_mean(q, w), want, 1e-12)
+
+
+@pytest.mark.parametrize("n", [5, 30])
+def test_mean_broadcasts_shared_quaternions_against_batched_weights(n):
+    q = random_quaternions(n, 42)
+    w = np.random.default_rng(43).uniform(0.1, 1.0, size=(4, n))
+    batched = rj.quaternion_mean(q, w)
+    assert batched.shape == (4, 4)
+    for k in range(4):
+        assert_close(batched[k], rj.quaternion_mean(q, w[k]), atol=1e-14)
+
+
+@pytest.mark.parametrize("n", [8, 30])
+def test_sum_outer_rule_equals_jax_derivative_of_its_code(n):
+    from rotjax._fitting import _sum_outer
+
+    rng = np.random.default_rng(44)
+    x, y, dx, dy = (jnp.asarray(rng.normal(size=(3, n, 4))) for _ in range(4))
+    want = jax.jvp(_sum_outer.fun, (x, y), (dx, dy))
+    got = jax.jvp(_sum_outer, (x, y), (dx, dy))
+    assert_close(got[0], want[0], atol=0)
+    assert_close(got[1], want[1], atol=1e-14)
+
+    def loss(f):
+        return lambda x: jnp.sum(jnp.sin(f(x, x[..., ::-1])))
+
+    assert_close(jax.hessian(loss(_sum_outer))(x), jax.hessian(loss(_sum_outer.fun))(x), 1e-13)
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_align_zero_weight_drops_a_pair(method):
     a, b, w, _ = wahba_problem(6, 16, noise=0.3)
