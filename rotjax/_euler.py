@@ -180,6 +180,15 @@ def _scaled_pair(u, v):
     return u * s, v * s, s
 
 
+def _lifted(u, v):
+    """The pair times ``2^k`` (exact), ``k`` half the exponent range, where both are below
+    ``2^-k``: products with components of order 1 down to eps then stay normal."""
+    k = 2 ** (jnp.finfo(u.dtype).nexp - 2)
+    low = jnp.maximum(jnp.abs(u), jnp.abs(v)) < 2.0**-k
+    f = jnp.where(low, 2.0**k, 1.0).astype(u.dtype)
+    return u * f, v * f
+
+
 def _hypot(u, v):
     """``sqrt(u^2 + v^2)`` at any scale (the pair is scaled by a power of two first: the
     modulus of ``(1e-160, 0)`` is ``1e-160``, not 0), with a finite (zero) gradient at the
@@ -292,13 +301,17 @@ def _quat_to_euler(q, seq):
 
     ``q`` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
     """
-    _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*(q[..., n] for n in range(4)), seq)
+    _, (a, b, c, d), _, locks, bad = _factors(*(q[..., n] for n in range(4)), seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
     # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
     # The three atan2 run on per-rotation arrays and their results are stacked on the last
     # axis: XLA:CPU compiles the extraction to one loop (two for Tait-Bryan sequences).
+    # A factor below 2^-k (k half the exponent range) is multiplied by 2^k (exact; the angles
+    # do not change): with only q scaled, the product of a small component of A and one of a
+    # tiny C could underflow (b c = 1e-7 * 1e-303) and lose a turn that the others do not carry.
+    sa, sb, sc, sd = _substitute((*_lifted(a, b), *_lifted(c, d)), locks)
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
