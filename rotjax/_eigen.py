@@ -45,38 +45,37 @@ _UNROLL_MAX = 64
 _CHUNK = {jnp.dtype(jnp.float32): 2**14, jnp.dtype(jnp.float64): 2**10}
 
 
-def _pow2_scaled(x, m):
-    """``x`` times the exact power of two that brings ``m`` (the largest ``|entry|`` of each
-    batch element of ``x``, broadcastable against it) into ``[1/2, 1)``; NaN where ``m`` is not
-    finite, ``x`` where ``m = 0``.
+def _pow2_factors(m):
+    """Two exact powers of two per batch element, ``(f0, f1)``, such that ``m * f0 * f1`` lies in
+    ``[1/2, 1)`` for ``m`` the largest ``|entry|`` of each batch element; NaN where ``m`` is not
+    finite, 1 where ``m = 0``. Applied one after the other (their product can overflow).
 
     ``m`` is first brought within ``2^+-k`` (``k`` half the exponent range) by a constant power
-    of two, then ``2^E`` of the result, read from its exponent bits, is inverted by one
-    division, exact for a power of two. The division is computed once per batch element;
-    ``frexp`` and ``ldexp`` are chains of cheap operations that XLA repeats for each entry of
-    every loop that reads the scaled array."""
-    dt = x.dtype
+    of two ``f0``, then ``2^E`` of the result, read from its exponent bits, is inverted by one
+    division, exact for a power of two. Both factors come from that one quotient, so XLA
+    computes them once per batch element, in a loop of their own, and each scaled entry costs
+    two multiplications (``frexp`` and ``ldexp`` are chains of cheap operations that XLA would
+    repeat for each entry of every loop that reads the scaled array)."""
+    dt = m.dtype
     info = jnp.finfo(dt)
     uint = jnp.uint32 if dt == jnp.float32 else jnp.uint64
-    m = jax.lax.stop_gradient(m)  # the factor is a constant: the derivative is x's times it
+    m = jax.lax.stop_gradient(m)  # the factors are constants: the derivative is x's times them
     k = float(2 ** (info.nexp - 2))  # 2^k, 2^-k, and their products with 2^E stay normal
     big, small = jnp.asarray(2.0**k, dt), jnp.asarray(2.0**-k, dt)
     c = jnp.where(m > big, small, jnp.where(m < small, big, 1.0))
     mc = m * c
     exp_bits = jnp.asarray(((1 << info.nexp) - 1) << info.nmant, uint)
     p = jax.lax.bitcast_convert_type(jax.lax.bitcast_convert_type(mc, uint) & exp_bits, dt)
-    # Both factors (c and 2^-(E+1), each normal; NaN for a non-finite m) as one quotient, so
-    # that XLA computes them once and each entry costs two multiplications.
     nan = jnp.where(jnp.isfinite(m), 1.0, jnp.nan)
     den = jnp.where((mc > 0) & jnp.isfinite(mc), p, 1.0)
     f = jnp.stack([c * nan, 0.5 * nan], -1) / jnp.stack([jnp.ones_like(den), den], -1)
-    return x * f[..., 0] * f[..., 1]
+    return f[..., 0], f[..., 1]
 
 
-def pow2_scale(x, axes):
-    """``x`` times an exact power of two per batch element, so that the largest ``|entry|`` over
-    the trailing ``axes`` lies in ``[1/2, 1)``; no rounding. Zero stays zero; a non-finite entry
-    gives NaN over the whole element."""
+def pow2_factors(x, axes):
+    """The factors ``(f0, f1)`` (each of the batch shape of ``x``, without ``axes``) by which
+    :func:`pow2_scale` multiplies ``x``, for callers that apply them inside their own products:
+    ``(x * f0) * f1`` is exact."""
     n = len(axes)
     if sorted(a % x.ndim for a in axes) != list(range(x.ndim - n, x.ndim)):
         raise ValueError(f"axes must be the trailing axes, got {axes} for shape {x.shape}")
@@ -84,10 +83,18 @@ def pow2_scale(x, axes):
     if flat.shape[-1] <= _UNROLL_MAX:
         # Elementwise maxima fuse with their neighbours and keep NaN (a max reduction over a
         # small axis is a loop of its own; with NaN made infinite first, a slow one).
-        m = max_abs(*(flat[..., i] for i in range(flat.shape[-1])))[..., None]
+        m = max_abs(*(flat[..., i] for i in range(flat.shape[-1])))
     else:
-        m = jnp.max(jnp.where(jnp.isnan(flat), jnp.inf, jnp.abs(flat)), axis=-1, keepdims=True)
-    return _pow2_scaled(flat, m).reshape(x.shape)
+        m = jnp.max(jnp.where(jnp.isnan(flat), jnp.inf, jnp.abs(flat)), axis=-1)
+    return _pow2_factors(m)
+
+
+def pow2_scale(x, axes):
+    """``x`` times an exact power of two per batch element, so that the largest ``|entry|`` over
+    the trailing ``axes`` lies in ``[1/2, 1)``; no rounding. Zero stays zero; a non-finite entry
+    gives NaN over the whole element."""
+    f0, f1 = (f.reshape(*f.shape, *(1,) * len(axes)) for f in pow2_factors(x, axes))
+    return x * f0 * f1
 
 
 def _rotation(app, aqq, apq):

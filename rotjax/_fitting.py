@@ -16,6 +16,7 @@ from ._eigen import (
     _UNROLL_MAX,
     nearest_quaternion,
     nearest_rotation,
+    pow2_factors,
     pow2_scale,
     top_eigenvector,
 )
@@ -43,28 +44,80 @@ def _einsum_outer(x, y):
     return jnp.einsum("...ni,...nj->...ij", x, y, precision=FULL)
 
 
+def _scaled(v, factors):
+    """``v`` times each factor in turn (exact for powers of two; their product could overflow)."""
+    for f in factors:
+        v = v * f
+    return v
+
+
 @jax.custom_jvp
-def _sum_outer(x, y):
-    """``sum_n x_n y_n^T`` ``(..., p, r)`` for ``(..., N, p)`` and ``(..., N, r)``. For a few
-    vectors each entry is a sum of products, all in one loop over the batch (XLA:CPU runs a
-    batched ``dot`` of such small matrices several times slower); for many, an ``einsum``.
-    The derivative is the product rule in ``einsum``s: the transpose of the per-entry slices
-    would be one pass over the data per entry and vector."""
+def _sum_outer(x, y, fx, fy):
+    """``sum_n (x_n fx)(y_n fy)^T`` ``(..., p, r)`` for ``(..., N, p)`` and ``(..., N, r)``;
+    ``fx``, ``fy`` are tuples of constant per-batch-element factors (powers of two from
+    :func:`pow2_factors`, or empty), applied inside the products so that they can neither
+    underflow nor overflow.
+
+    For a few vectors every entry is a sum of products, all in one loop over the batch that
+    reads the inputs once (XLA:CPU runs a batched ``dot`` of such small matrices several times
+    slower, and scaled copies of the inputs would be written and read again); for many, an
+    ``einsum``. The derivative (:func:`_outer_tangent`) is written so that its transpose, the
+    reverse mode, is elementwise too."""
     n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
-    if n * max(p, r) > _UNROLL_MAX:
-        return _einsum_outer(x, y)
+    if not _unrolled(x, y):
+        return _einsum_outer(*_scaled_pair(x, y, fx, fy))
+    x, y, fx, fy = _broadcast_batch(x, y, fx, fy)
+    xs = [[_scaled(x[..., k, i], fx) for i in range(p)] for k in range(n)]
+    ys = [[_scaled(y[..., k, j], fy) for j in range(r)] for k in range(n)]
+    rows = [[sum(xs[k][i] * ys[k][j] for k in range(n)) for j in range(r)] for i in range(p)]
+    return jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
+
+
+def _unrolled(x, y):
+    return x.shape[-2] * max(x.shape[-1], y.shape[-1]) <= _UNROLL_MAX
+
+
+def _broadcast_batch(x, y, fx, fy):
+    """``x``, ``y`` and their factors broadcast to one batch shape."""
     batch = jnp.broadcast_shapes(x.shape[:-2], y.shape[:-2])
     x, y = jnp.broadcast_to(x, batch + x.shape[-2:]), jnp.broadcast_to(y, batch + y.shape[-2:])
-    rows = [
-        [sum(x[..., k, i] * y[..., k, j] for k in range(n)) for j in range(r)] for i in range(p)
-    ]
-    return jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
+    fx, fy = ([jnp.broadcast_to(f, batch) for f in fs] for fs in (fx, fy))
+    return x, y, fx, fy
+
+
+def _scaled_pair(x, y, fx, fy):
+    return (_scaled(v, [f[..., None, None] for f in fs]) for v, fs in ((x, fx), (y, fy)))
+
+
+def _outer_tangent(x, y, dx, dy):
+    """``sum_n dx_n y_n^T + x_n dy_n^T`` for the unrolled case, as columns ``sum_n dx_n y_nj``
+    and rows ``sum_n x_ni dy_n``: slices of the constants ``x``, ``y`` times whole rows of the
+    tangents, so that the transpose is elementwise products of the cotangent's rows and columns
+    with ``x`` and ``y``, with no reduction and no batched ``dot`` (an ``einsum`` here costs
+    XLA:CPU several times more in reverse mode, and per-entry slices of the tangents one pass
+    over the data per entry)."""
+    n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
+    cols = jnp.stack(
+        [sum(dx[..., k, :] * y[..., k, j : j + 1] for k in range(n)) for j in range(r)], -1
+    )
+    rows = jnp.stack(
+        [sum(x[..., k, i : i + 1] * dy[..., k, :] for k in range(n)) for i in range(p)], -2
+    )
+    return cols + rows
 
 
 @_sum_outer.defjvp
 def _sum_outer_jvp(primals, tangents):
-    (x, y), (dx, dy) = primals, tangents
-    return _sum_outer(x, y), _einsum_outer(dx, y) + _einsum_outer(x, dy)
+    (x, y, fx, fy), (dx, dy, _, _) = primals, tangents  # the factors are constants
+    out = _sum_outer(x, y, fx, fy)
+    if not _unrolled(x, y):
+        (xs, ys), (dxs, dys) = _scaled_pair(x, y, fx, fy), _scaled_pair(dx, dy, fx, fy)
+        return out, _einsum_outer(dxs, ys) + _einsum_outer(xs, dys)
+    batch = out.shape[:-2]
+    dx, dy = (jnp.broadcast_to(v, batch + v.shape[-2:]) for v in (dx, dy))
+    x, y, fx, fy = _broadcast_batch(x, y, fx, fy)
+    (xs, ys), (dxs, dys) = _scaled_pair(x, y, fx, fy), _scaled_pair(dx, dy, fx, fy)
+    return out, _outer_tangent(xs, ys, dxs, dys)
 
 
 def _mT(x):
@@ -302,11 +355,9 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
         if weights.ndim < 1 or weights.shape[-1] != a.shape[-2]:
             raise ValueError(f"weights: expected shape (..., {a.shape[-2]}), got {weights.shape}")
         a = a * pow2_scale(weights, (-1,))[..., None]
-    # Each set of vectors scaled by a power of two first (exact), so that B neither underflows
-    # nor overflows; the rotation does not depend on these scales.
-    a = pow2_scale(a, (-2, -1))
-    b = pow2_scale(b, (-2, -1))
-    B = _einsum_outer(a, b)
+    # Each set of vectors scaled by a power of two (exact) inside the products, so that B
+    # neither underflows nor overflows; the rotation does not depend on these scales.
+    B = _sum_outer(a, b, pow2_factors(a, (-2, -1)), pow2_factors(b, (-2, -1)))
     q = nearest_quaternion(B)
     return from_scalar_last(q, scalar_first).astype(dt)  # w >= 0
 
@@ -356,7 +407,7 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
     if weights is not None and (weights.ndim < 1 or weights.shape[-1] != q.shape[-2]):
         raise ValueError(f"weights: expected shape (..., {q.shape[-2]}), got {weights.shape}")
     qw = q if weights is None else q * pow2_scale(weights, (-1,))[..., None]
-    M = _sum_outer(qw, q)
+    M = _sum_outer(qw, q, (), ())
     v = top_eigenvector(M)
     if weights is not None:
         v = jnp.where(jnp.all(weights == 0, axis=-1, keepdims=True), jnp.nan, v)

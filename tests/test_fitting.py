@@ -270,20 +270,36 @@ def test_mean_broadcasts_shared_quaternions_against_batched_weights(n):
 
 
 @pytest.mark.parametrize("n", [8, 30])
-def test_sum_outer_rule_equals_jax_derivative_of_its_code(n):
+@pytest.mark.parametrize("scale", [1.0, 1e-170])
+def test_sum_outer_rule_equals_jax_derivative_of_its_code(n, scale):
+    # At 1e-170 the products of x and y underflow unless the factors are applied inside them,
+    # and the rule must scale its einsums the same way. Inputs are u * scale (u of order 1),
+    # so that derivatives in u are of order 1 too.
+    from rotjax._eigen import pow2_factors
     from rotjax._fitting import _sum_outer
 
     rng = np.random.default_rng(44)
-    x, y, dx, dy = (jnp.asarray(rng.normal(size=(3, n, 4))) for _ in range(4))
-    want = jax.jvp(_sum_outer.fun, (x, y), (dx, dy))
-    got = jax.jvp(_sum_outer, (x, y), (dx, dy))
+    u, v, du, dv = (jnp.asarray(rng.normal(size=(3, n, 4))) for _ in range(4))
+    fx = fy = ()
+    if scale != 1.0:
+        fx, fy = pow2_factors(u * scale, (-2, -1)), pow2_factors(v * scale, (-2, -1))
+        assert float(jnp.max(jnp.abs(jnp.einsum("...ni,...nj->...ij", u * scale, v * scale)))) == 0
+
+    def rule(u, v):
+        return _sum_outer(u * scale, v * scale, fx, fy)
+
+    def code(u, v):
+        return _sum_outer.fun(u * scale, v * scale, fx, fy)
+
+    want, got = jax.jvp(code, (u, v), (du, dv)), jax.jvp(rule, (u, v), (du, dv))
+    assert float(jnp.min(jnp.abs(want[0]))) > 1e-6
     assert_close(got[0], want[0], atol=0)
     assert_close(got[1], want[1], atol=1e-14)
 
     def loss(f):
-        return lambda x: jnp.sum(jnp.sin(f(x, x[..., ::-1])))
+        return lambda u: jnp.sum(jnp.sin(f(u, v)) + jnp.sin(f(v, u)))
 
-    assert_close(jax.hessian(loss(_sum_outer))(x), jax.hessian(loss(_sum_outer.fun))(x), 1e-13)
+    assert_close(jax.hessian(loss(rule))(u), jax.hessian(loss(code))(u), 1e-13)
 
 
 @pytest.mark.parametrize("method", METHODS)

@@ -68,10 +68,12 @@ STEPS = 1024
 
 
 def _vector_pairs(rng, q):
-    """Problems of GROUP pairs ``(a_i, b_i)``, ``b_i = R a_i + noise``: (n, GROUP, 2, 3)."""
+    """Problems of GROUP pairs ``(a_i, b_i)``, ``b_i = R a_i + noise``: two arrays (n, GROUP, 3),
+    as a caller of ``align_vectors(a, b)`` holds them (slices of one interleaved array would be
+    copied before the call)."""
     a = rng.normal(size=(len(q), GROUP, 3))
     b = np.einsum("nij,nkj->nki", A.np_matrix(q), a) + 0.01 * rng.normal(size=a.shape)
-    return np.stack([a, b], axis=2)
+    return a, b
 
 
 def _quaternion_groups(rng, q):
@@ -213,15 +215,16 @@ def _integrate_samples(method):
 def _align(x, method="svd"):
     from .. import align_vectors
 
-    return align_vectors(x[..., 0, :], x[..., 1, :], method=method)
+    a, b = x
+    return align_vectors(a, b, method=method)
 
 
 def _bare_svd_of_b(x):
     """A batched SVD of the problems' ``B = sum_i b_i a_i^T``: the LAPACK baseline."""
     import jax.numpy as jnp
 
-    B = jnp.einsum("...ki,...kj->...ij", x[..., 1, :], x[..., 0, :])
-    return jnp.linalg.svd(B)
+    a, b = x
+    return jnp.linalg.svd(jnp.einsum("...ki,...kj->...ij", a, b))
 
 
 def _bare_svd_projection(x):

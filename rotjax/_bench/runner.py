@@ -57,9 +57,11 @@ def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
         for dt in ["float32", "float64"] + (["bfloat16", "float16"] if op in low else []):
             log(f"[bench {time.perf_counter() - t_start:6.1f}s] {op} {dt}")
             jdt = jnp.dtype(dt)
-            x_np = x64.astype(np.float64 if dt == "float64" else np.float32)
-            x_jax = jnp.asarray(x64, dtype=jdt)
-            x1 = np.array(x_jax[0])
+            np_dt = np.float64 if dt == "float64" else np.float32
+            # An input is an array or a tuple of arrays (the batch first in each).
+            x_np = jax.tree.map(lambda v, t=np_dt: v.astype(t), x64)
+            x_jax = jax.tree.map(lambda v, t=jdt: jnp.asarray(v, dtype=t), x64)
+            x1 = jax.tree.map(lambda v: np.array(v[0]), x_jax)
             cont = case.contenders(found)
             if dt in ("bfloat16", "float16"):
                 cont = [c for c in cont if c.impl == "rotjax" and not (quick and c != cont[0])]
@@ -96,7 +98,8 @@ def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
                     math.prod(leaf.shape[1:])
                     for leaf in jax.tree.leaves(jax.eval_shape(cont[0].fn, x_jax))
                 )
-                kernel = T.copy_kernel(math.prod(x_jax.shape[1:]), n_out)
+                n_in = sum(math.prod(leaf.shape[1:]) for leaf in jax.tree.leaves(x_jax))
+                kernel = T.copy_kernel(n_in, n_out)
                 entries[copy_key] = (jax.jit(kernel).lower(x_jax).compile(), x_jax)
             for key, g in grads.items():
                 entries[("grad",) + key] = g
@@ -137,8 +140,8 @@ def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
                 ):
                     # One rotation, unbatched (jaxlie's adapters vmap, so they get a batch of 1).
                     # rotjax's public functions jit-wrap themselves; jax.scipy runs op by op.
-                    x1_np = np.array(x1, np.float64 if dt == "float64" else np.float32)
-                    x1_in = x1_np[None] if impl == "jaxlie" else x1_np
+                    x1_np = jax.tree.map(lambda v, t=np_dt: np.array(v, t), x1)
+                    x1_in = jax.tree.map(lambda v: v[None], x1_np) if impl == "jaxlie" else x1_np
                     T.timed(fn, x1_in)  # the first call compiles: not part of the latency
                     row["eager_us"], row["eager_vs_scipy"] = T.eager(
                         fn, x1_in, scipy_eager, x1_np, eager_reps

@@ -16,11 +16,14 @@ MIN_COPY_BATCH = 1 << 20
 
 
 def copy_kernel(n_in: int, n_out: int):
-    """Reads ``n_in`` and writes ``n_out`` floats per rotation, one add per output value."""
+    """Reads ``n_in`` and writes ``n_out`` floats per rotation, one add per output value; the
+    input is an array or a tuple of arrays (joined per rotation)."""
+    import jax
     import jax.numpy as jnp
 
     def f(x):
-        x = x.reshape(x.shape[0], n_in)
+        leaves = jax.tree.leaves(x)
+        x = jnp.concatenate([v.reshape(v.shape[0], -1) for v in leaves], axis=1)
         if n_in >= n_out:  # fold the extra inputs into the outputs so that every byte is read
             out = x[:, :n_out]
             for k in range(n_out, n_in, n_out):
