@@ -28,7 +28,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-from ._numerics import TIE_ULPS, eps, max_abs, safe_div
+from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div
 
 # One-sided Jacobi converges quadratically (Hestenes 1958; Demmel & Veselic 1992). The sweep
 # counts are the fewest that orthogonalise the columns to the rounding level for every matrix
@@ -173,7 +173,7 @@ def _polar(B, nan_at_zero=True):
     are the largest, and ``Q = u_a v_a^T + u_b v_b^T + (u_a x u_b)(v_a x v_b)^T`` from them,
     ``u = w / |w|``: a rotation, whatever the sign of ``det B``.
     """
-    from ._matrix import _k4_columns  # _matrix imports this module
+    from ._matrix import _k4_columns, _select_column, _stack_last  # they import this module
 
     Bs = pow2_scale(B, (-2, -1))
     eye = jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), Bs.shape)
@@ -204,20 +204,15 @@ def _polar(B, nan_at_zero=True):
         ],
         -2,
     )
-    # Shepperd's extraction: the column of K = 4 q q^T with the largest diagonal, normalised to
-    # w >= 0 (an argmax, and the sign inside the one quotient, for one choice across the four
-    # components). Within rounding of 180 degrees (|w| <= 4 eps) the selected component is
-    # positive instead, so that rounding of the input cannot flip the result.
-    cols, diag = _k4_columns(Q)
-    k = jnp.argmax(jnp.stack(diag, axis=-1), axis=-1)
-    c = [
-        jnp.where(k == 0, x, jnp.where(k == 1, y, jnp.where(k == 2, z, w)))
-        for x, y, z, w in zip(*cols, strict=True)
-    ]
-    n = sum(x * x for x in c)
+    # Shepperd's extraction, as in matrix_to_quaternion: the column of K = 4 q q^T with the
+    # largest diagonal (at least 1 for a rotation, so |c|^2 >= 4 is in rsqrt's domain),
+    # normalised to w >= 0; rsqrt (multiplications only) and the nested selection fuse into
+    # the one loop that writes q. Within rounding of 180 degrees (|w| <= 4 eps) the selected
+    # component is positive instead, so that rounding of the input cannot flip the result.
+    c, n = _select_column(*_k4_columns(Q))
     flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
-    inv = jnp.where(flip, -1.0, 1.0) / jnp.sqrt(n)
-    q = jnp.stack(c, axis=-1) * inv[..., None]
+    inv = rsqrt(n)
+    q = _stack_last(c, jnp.where(flip, -inv, inv))
     s = jnp.stack([_dot3(ua, wa), _dot3(ub, wb), _dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)
 
