@@ -91,11 +91,11 @@ def _scaled_pair(x, y, fx, fy):
 
 def _outer_tangent(x, y, dx, dy):
     """``sum_n dx_n y_n^T + x_n dy_n^T`` for the unrolled case, as columns ``sum_n dx_n y_nj``
-    and rows ``sum_n x_ni dy_n``: slices of the constants ``x``, ``y`` times whole rows of the
-    tangents, so that the transpose is elementwise products of the cotangent's rows and columns
-    with ``x`` and ``y``, with no reduction and no batched ``dot`` (an ``einsum`` here costs
-    XLA:CPU several times more in reverse mode, and per-entry slices of the tangents one pass
-    over the data per entry)."""
+    and rows ``sum_n x_ni dy_n``: whole vectors of the tangents times entries of the constants
+    ``x``, ``y``. The transpose (reverse mode) is then, per vector, the cotangent's columns or
+    rows times entries of ``x`` and ``y``: no reduction and no batched ``dot``. An ``einsum``
+    here costs XLA:CPU about twice as much in reverse mode, and slicing the tangents entry by
+    entry costs a pass over the data per entry."""
     n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
     cols = jnp.stack(
         [sum(dx[..., k, :] * y[..., k, j : j + 1] for k in range(n)) for j in range(r)], -1
