@@ -355,9 +355,25 @@ def test_matrix_products_ask_for_full_precision(name):
 
 def test_precision_check_sees_matrix_products():
     # The check above is not vacuous: these functions do contain matrix products.
-    for name in ("quaternion_mean", "align_vectors", "wahba_sensitivity", "geodesic_distance"):
+    for name in ("wahba_sensitivity", "geodesic_distance"):
         f, args = EVERY_PUBLIC[name]
         assert _dot_generals(f, args), name
+
+
+_MANY = np.random.default_rng(6).normal(size=(3, 30, 4)).astype(np.float32)
+
+
+@pytest.mark.parametrize(
+    ("f", "args"),
+    [(rj.quaternion_mean, (_MANY[0],)), (rj.align_vectors, (_MANY[1, :, :3], _MANY[2, :, :3]))],
+    ids=["quaternion_mean", "align_vectors"],
+)
+def test_matrix_products_of_many_vectors_ask_for_full_precision(f, args):
+    # For a few vectors these form their matrix as sums of products (no matrix product, so the
+    # check above sees none); for many, with an einsum, which must ask for full precision too.
+    lines = _dot_generals(f, args)
+    assert lines
+    assert all("HIGHEST" in ln for ln in lines), "\n".join(lines)
 
 
 # --- shapes and arguments, for every public function -----------------------------------------
