@@ -93,9 +93,9 @@ def _outer_tangent(x, y, dx, dy):
     """``sum_n dx_n y_n^T + x_n dy_n^T`` for the unrolled case, as columns ``sum_n dx_n y_nj``
     and rows ``sum_n x_ni dy_n``: whole vectors of the tangents times entries of the constants
     ``x``, ``y``. The transpose (reverse mode) is then, per vector, the cotangent's columns or
-    rows times entries of ``x`` and ``y``: no reduction and no batched ``dot``. An ``einsum``
-    here costs XLA:CPU about twice as much in reverse mode, and slicing the tangents entry by
-    entry costs a pass over the data per entry."""
+    rows times entries of ``x`` and ``y``: no reduction and no batched ``dot`` (an ``einsum``,
+    which XLA:CPU runs slowly for such small matrices, or a pass over the data for each entry
+    of the tangents sliced one by one)."""
     n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
     cols = jnp.stack(
         [sum(dx[..., k, :] * y[..., k, j : j + 1] for k in range(n)) for j in range(r)], -1
@@ -113,9 +113,8 @@ def _sum_outer_jvp(primals, tangents):
     if not _unrolled(x, y):
         (xs, ys), (dxs, dys) = _scaled_pair(x, y, fx, fy), _scaled_pair(dx, dy, fx, fy)
         return out, _einsum_outer(dxs, ys) + _einsum_outer(xs, dys)
-    batch = out.shape[:-2]
-    dx, dy = (jnp.broadcast_to(v, batch + v.shape[-2:]) for v in (dx, dy))
     x, y, fx, fy = _broadcast_batch(x, y, fx, fy)
+    dx, dy = jnp.broadcast_to(dx, x.shape), jnp.broadcast_to(dy, y.shape)
     (xs, ys), (dxs, dys) = _scaled_pair(x, y, fx, fy), _scaled_pair(dx, dy, fx, fy)
     return out, _outer_tangent(xs, ys, dxs, dys)
 

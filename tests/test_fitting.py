@@ -302,6 +302,30 @@ def test_sum_outer_rule_equals_jax_derivative_of_its_code(n, scale):
     assert_close(jax.hessian(loss(rule))(u), jax.hessian(loss(code))(u), 1e-13)
 
 
+def test_sum_outer_rule_broadcasts_like_its_code():
+    # Shared quaternions against batched weights (quaternion_mean): x has a batch axis, y none.
+    from rotjax._fitting import _sum_outer
+
+    rng = np.random.default_rng(45)
+    x, dx = (jnp.asarray(rng.normal(size=(4, 8, 4))) for _ in range(2))
+    y, dy = (jnp.asarray(rng.normal(size=(8, 4))) for _ in range(2))
+
+    def rule(x, y):
+        return _sum_outer(x, y, (), ())
+
+    def code(x, y):
+        return _sum_outer.fun(x, y, (), ())
+
+    assert_close(jax.jvp(rule, (x, y), (dx, dy))[1], jax.jvp(code, (x, y), (dx, dy))[1], 1e-14)
+
+    def grads(f):
+        return jax.grad(lambda x, y: jnp.sum(jnp.sin(f(x, y))), argnums=(0, 1))(x, y)
+
+    for got, want in zip(grads(rule), grads(code), strict=True):
+        assert got.shape == want.shape
+        assert_close(got, want, 1e-14)
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_align_zero_weight_drops_a_pair(method):
     a, b, w, _ = wahba_problem(6, 16, noise=0.3)
