@@ -97,12 +97,11 @@ def _outer_tangent(x, y, dx, dy):
     which XLA:CPU runs slowly for such small matrices, or a pass over the data for each entry
     of the tangents sliced one by one)."""
     n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
-    cols = jnp.stack(
-        [sum(dx[..., k, :] * y[..., k, j : j + 1] for k in range(n)) for j in range(r)], -1
-    )
-    rows = jnp.stack(
-        [sum(x[..., k, i : i + 1] * dy[..., k, :] for k in range(n)) for i in range(p)], -2
-    )
+    # Each tangent vector is sliced once: the transpose of a slice is a pad of the whole
+    # cotangent, and XLA evaluates every pad of a sum at every entry.
+    dxs, dys = ([d[..., k, :] for k in range(n)] for d in (dx, dy))
+    cols = jnp.stack([sum(dxs[k] * y[..., k, j : j + 1] for k in range(n)) for j in range(r)], -1)
+    rows = jnp.stack([sum(x[..., k, i : i + 1] * dys[k] for k in range(n)) for i in range(p)], -2)
     return cols + rows
 
 
