@@ -93,12 +93,10 @@ def _outer_tangent(x, y, dx, dy):
     """``sum_n dx_n y_n^T + x_n dy_n^T`` for the unrolled case, as columns ``sum_n dx_n y_nj``
     and rows ``sum_n x_ni dy_n``: whole vectors of the tangents times entries of the constants
     ``x``, ``y``. The transpose (reverse mode) is then, per vector, the cotangent's columns or
-    rows times entries of ``x`` and ``y``: no reduction and no batched ``dot`` (an ``einsum``,
-    which XLA:CPU runs slowly for such small matrices, or a pass over the data for each entry
-    of the tangents sliced one by one)."""
+    rows times entries of ``x`` and ``y``: no reduction and no batched ``dot``. Each tangent
+    vector is sliced once: JAX transposes a slice into a pad of the whole cotangent, and XLA
+    evaluates every pad of a sum at every entry."""
     n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
-    # Each tangent vector is sliced once: the transpose of a slice is a pad of the whole
-    # cotangent, and XLA evaluates every pad of a sum at every entry.
     dxs, dys = ([d[..., k, :] for k in range(n)] for d in (dx, dy))
     cols = jnp.stack([sum(dxs[k] * y[..., k, j : j + 1] for k in range(n)) for j in range(r)], -1)
     rows = jnp.stack([sum(x[..., k, i : i + 1] * dys[k] for k in range(n)) for i in range(p)], -2)
