@@ -9,7 +9,7 @@ from jax.test_util import check_grads
 from scipy.spatial.transform import Rotation
 
 import rotjax as rj
-from rotjax._eigen import top_eigenvector
+from rotjax._eigen import _CHUNK, top_eigenvector
 
 mpmath.mp.dps = 40
 _top = jax.jit(top_eigenvector)
@@ -89,10 +89,11 @@ def test_bad_input_gives_nan():
     assert np.isnan(rj.align_vectors(jnp.ones((3, 3)), jnp.ones((3, 3)), jnp.zeros(3))).all()
     assert np.isnan(rj.quaternion_mean(jnp.ones((3, 4)), jnp.zeros(3))).all()
     # in a batch run in chunks, the NaN stays in its own element
-    B = np.broadcast_to(np.eye(3), (2**11 + 3, 3, 3)).copy()
-    B[5], B[2**10 + 1, 1, 2] = 0.0, np.inf
+    chunk = _CHUNK[np.dtype(np.float64)]
+    B = np.broadcast_to(np.eye(3), (2 * chunk + 3, 3, 3)).copy()
+    B[5], B[chunk + 1, 1, 2] = 0.0, np.inf
     bad = np.zeros(len(B), bool)
-    bad[[5, 2**10 + 1]] = True
+    bad[[5, chunk + 1]] = True
     for f in (
         lambda B: rj.matrix_to_quaternion(B, method="optimal"),
         lambda B: rj.nined_to_matrix(B.reshape(-1, 9)),
@@ -188,13 +189,15 @@ def test_exact_rotations_under_jit():
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-@pytest.mark.parametrize("n", [3 * 2**14 + 5, 2**15])
-def test_chunked_batches_agree_with_one_piece(n, dtype):
+@pytest.mark.parametrize("chunks", [(2, 5), (2, 0)])
+def test_chunked_batches_agree_with_one_piece(chunks, dtype):
     """Large batches run in chunks on the CPU (padded where the batch is not a multiple; the
     chunk size depends on the dtype): the same vectors as the kernel applied in one piece, in
     every batch element (up to rounding, which near-ties among random matrices amplify)."""
     from rotjax._eigen import _by_chunks, _polar
 
+    whole_chunks, extra = chunks
+    n = whole_chunks * _CHUNK[np.dtype(dtype)] + extra
     tol = 1e-12 if dtype == np.float64 else 1e-5  # on 1 - |cos|: angles of 1e-6 and 3e-3
     rng = np.random.default_rng(n)
     B = jnp.asarray(rng.standard_normal((n, 3, 3)), dtype)
