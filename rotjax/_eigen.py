@@ -15,9 +15,10 @@ matrix (Bar-Itzhack 2000), Wahba's problem (Davenport's q-method) and the quater
   singular value; ``det B < 0`` and rank-deficient ``B`` included), and Shepperd's extraction.
   ``B`` is first scaled by an exact power of two, so the result does not depend on its scale.
   On the CPU the batch runs in cache-sized chunks (every intermediate stays in cache).
-* Derivative: ``dv = (lambda_top I - K)^+ dK v``, written as a differentiable expression of
-  ``K`` (see :func:`_top_jvp`), so second derivatives are exact where the top eigenvalue is
-  simple, including at ties among the lower ones (exact rotations, identical means).
+* Derivative: from the 3x3 problem, ``dv = v (x) (w / 2, 0)`` with ``(tr(H) I - H) w =
+  vee(Q^T dB - dB^T Q)``, ``H = Q^T B``, written as a differentiable expression of ``B`` (see
+  :func:`_top_jvp`), so second derivatives are exact where the top eigenvalue is simple,
+  including at ties among the lower ones (exact rotations, identical means).
 """
 
 from __future__ import annotations
@@ -266,27 +267,6 @@ def _check(K):
         raise ValueError(f"K: expected shape (..., 4, 4), got {tuple(K.shape)}")
 
 
-def _half_turns(q, V):
-    """Eigenvectors ``(..., 4, 4)`` (columns) of ``K(B)`` from its top one ``q`` and the right
-    singular vectors ``V`` of ``B``: ``q`` and ``q (x) (v_j, 0)``, ``j = 0, 1, 2``."""
-    x, y, z, w = (q[..., i] for i in range(4))
-    cols = [q]
-    for j in range(3):
-        a, b, c = (V[..., i, j] for i in range(3))
-        cols.append(
-            jnp.stack(
-                [
-                    w * a + y * c - z * b,
-                    w * b + z * a - x * c,
-                    w * c + x * b - y * a,
-                    -(x * a + y * b + z * c),
-                ],
-                axis=-1,
-            )
-        )
-    return jnp.stack(cols, axis=-1)
-
-
 @jax.custom_jvp
 def _top(B, q, aux):
     """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller with ``aux``, the
@@ -351,73 +331,55 @@ def top_eigenvector(K):
     return _nearest(_k_to_b(K), nan_at_zero=False)
 
 
-# The derivative rule's small products are sums of per-element terms, not ``jnp.sum`` over a
-# trailing axis of 4 (``_numerics.matvec``): XLA:CPU compiles each such reduction to a kernel of
-# its own, a slow one in float64.
-
-
-def _mv(A, x):
-    """``A @ x`` for ``(..., 4, 4)`` and ``(..., 4)``."""
-    return jnp.stack([sum(A[..., i, k] * x[..., k] for k in range(4)) for i in range(4)], -1)
-
-
-def _mtv(A, x):
-    """``A^T @ x``."""
-    return _mv(jnp.swapaxes(A, -1, -2), x)
-
-
-def _dot(x, y):
-    """``x . y`` over the last axis of 4 (``keepdims``)."""
-    return sum(x[..., k] * y[..., k] for k in range(4))[..., None]
-
-
-def _max(x):
-    """Largest entry over the last axis of 4 (``keepdims``)."""
-    return jnp.maximum(jnp.maximum(x[..., 0], x[..., 1]), jnp.maximum(x[..., 2], x[..., 3]))[
-        ..., None
-    ]
-
-
 @_top.defjvp
 def _top_jvp(primals, tangents):
-    # dv = (lambda I - K)^+ dK v = M^{-1} (I - v v^T) dK v, with M = lambda I - K + c v v^T
-    # (invertible where lambda is simple; M^{-1} v = v / c, so the v v^T term cancels).
-    # M^{-1} is evaluated as 2 X - X M X with X = M^{-1} from the eigendecomposition (constant):
-    # the same value, and its derivative in K is that of M^{-1}. With v and lambda = v^T K v
-    # themselves differentiable (this rule, recursively), the expression is an exact identity
-    # in K, so its derivative is the second derivative of v. Its only gap terms are to the top
-    # eigenvalue: lower ties (exact rotations, identical inputs to a mean) do not appear. A gap
-    # to the top below TIE_ULPS eps |K| is a tie: X is 0 there. K = davenport_k(B) scaled by an
-    # exact power of two (v does not depend on the scale), as in the kernel: its eigenvalues
-    # are sum(s) (top) and sum(s) - 2 (s_k + s_l) (half turn about v_j) for the kernel's s.
+    # The rotation Q = R(v) maximises tr(Q^T B), so H = Q^T B is symmetric for every B. Moving B
+    # by dB moves Q to Q (I + [w]x), and keeping H symmetric gives
+    #     (tr(H) I - H) w = vee(Q^T dB - dB^T Q),      dv = v (x) (w / 2, 0).
+    # tr(H) I - H = V diag(g) V^T, g_j = s_k + s_l from the kernel's signed singular values s:
+    # half the gaps from the top eigenvalue of K(B), which are its only gap terms (lower ties,
+    # as at exact rotations or identical inputs to a mean, leave it invertible). Its inverse is
+    # evaluated as 2 Y - Y A Y with Y = V diag(1/g) V^T (constant): the same value, and its
+    # derivative in B is that of A^{-1}. With v differentiable (this rule, recursively), the
+    # expression is an exact identity in B, so its derivative is the second derivative of v. A
+    # gap below TIE_ULPS eps |K| is a tie: Y is 0 along it. B is scaled by the kernel's exact
+    # power of two (v does not depend on the scale).
+    from ._quaternion import _multiply, _to_matrix  # its package imports this module
+
     (B, qe, aux), (dB, _, _) = primals, tangents
     V, s = aux
     Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor
-    K, dK = davenport_k(Bs), davenport_k(dBs)
-    E = _half_turns(qe, V)
     v = _top(B, qe, aux)
-    lam = _dot(v, _mv(K, v))[..., 0]
+    Q = _to_matrix(v)
+
+    def qt(X, i, j):
+        """``(Q^T X)_ij`` as a sum of per-element terms: XLA:CPU compiles a reduction over a
+        small trailing axis (``jnp.sum``, ``einsum``) to a slow kernel of its own."""
+        return sum(Q[..., k, i] * X[..., k, j] for k in range(3))
+
+    H = [[qt(Bs, i, j) for j in range(3)] for i in range(3)]
+    tr = H[0][0] + H[1][1] + H[2][2]
+    r = [qt(dBs, j, k) - qt(dBs, k, j) for j, k in ((2, 1), (0, 2), (1, 0))]  # vee(Q^T dB - dB^T Q)
     s0, s1, s2 = (s[..., i] for i in range(3))
-    gaps = [2.0 * (s1 + s2), 2.0 * (s0 + s2), 2.0 * (s0 + s1)]
     top = s0 + s1 + s2
-    scale = max_abs(top, *(top - g for g in gaps))[..., None]
-    c = jnp.where(scale > 0, scale, 1.0)
-    tol = TIE_ULPS * eps(K.dtype) * scale
-    # X's eigenvalues: 1/c along v (column 0 of E), 1/gap_j along the others.
-    inv_mu = jnp.concatenate(
-        [jnp.zeros_like(scale), safe_div(1.0, jnp.stack(gaps, axis=-1), tol)], -1
-    )
+    gaps = [s1 + s2, s0 + s2, s0 + s1]
+    tol = 0.5 * TIE_ULPS * eps(B.dtype) * max_abs(top, *(top - 2.0 * g for g in gaps))
+    inv_g = [safe_div(1.0, g, tol) for g in gaps]
+    v_cols = [[V[..., i, j] for i in range(3)] for j in range(3)]
 
-    def X(x):
-        return _mv(E, inv_mu * _mtv(E, x)) + qe * _dot(qe, x) / c
+    def Y(x):
+        c = [inv_g[j] * _dot3(v_cols[j], x) for j in range(3)]
+        return [sum(c[j] * v_cols[j][i] for j in range(3)) for i in range(3)]
 
-    def M(x):
-        return lam[..., None] * x - _mv(K, x) + c * v * _dot(v, x)
+    def A(x):  # tr(H) I - (H + H^T) / 2
+        return [
+            tr * x[i] - sum(0.5 * (H[i][k] + H[k][i]) * x[k] for k in range(3)) for i in range(3)
+        ]
 
-    Kv = _mv(dK, v)
-    w = Kv - v * _dot(v, Kv)
-    y = X(w)
-    return v, 2.0 * y - X(M(y))  # v, not the constant q: its derivative is the next order's
+    y = Y(r)
+    half_w = [y[i] - 0.5 * z for i, z in enumerate(Y(A(y)))]  # (2 y - Y A y) / 2
+    dv = _multiply(v, jnp.stack([*half_w, jnp.zeros_like(tr)], axis=-1))
+    return v, dv  # v, not the constant q: its derivative is the next order's
 
 
 def davenport_k(B):

@@ -215,27 +215,27 @@ def test_chunked_batches_agree_with_one_piece(chunks, dtype):
 
 
 @pytest.mark.parametrize("name", ["gaussian", "sigma=0.3", "det<0", "near-tie"])
-def test_the_rules_eigendecomposition(name):
-    """The derivative rule's eigenvectors and eigenvalues, from one kernel run on the ``B`` of
-    ``K``: the top eigenvector and its compositions with half turns about the right singular
-    vectors (:func:`_half_turns`) are orthonormal, with eigenvalues ``sum(s)`` and
-    ``sum(s) - 2 (s_k + s_l)`` of the prescaled ``K(B)``, the first the largest."""
-    from rotjax._eigen import _half_turns, _k_to_b, _polar, davenport_k, pow2_scale
+def test_the_rules_decomposition(name):
+    """The derivative rule's decomposition, from one kernel run on the ``B`` of ``K``: the right
+    singular vectors ``V`` are orthonormal and diagonalise ``H = Q^T B`` (prescaled) with the
+    signed singular values ``s``, so that ``tr(H) I - H = V diag(s_k + s_l) V^T``; ``sum(s)`` is
+    the top eigenvalue of ``K(B)`` and the gaps ``s_k + s_l`` to it are not negative."""
+    from rotjax._eigen import _k_to_b, _polar, davenport_k, pow2_scale
 
     B = _k_to_b(jnp.asarray(CASES[name]))
-    q, _, (V, s) = jax.jit(_polar)(B)
-    E = np.asarray(_half_turns(q, V))
-    K = np.asarray(davenport_k(pow2_scale(B, (-2, -1))))
-    s = np.asarray(s)
-    t = s.sum(-1, keepdims=True)
-    lam = np.concatenate([t, t - 2 * (t - s)], -1)  # column j + 1: the half turn about v_j
-    scale = np.abs(K).max()
+    _, Q, (V, s) = jax.jit(_polar)(B)
+    Bs = np.asarray(pow2_scale(B, (-2, -1)))
+    Q, V, s = np.asarray(Q), np.asarray(V), np.asarray(s)
+    H = np.swapaxes(Q, -1, -2) @ Bs
+    scale = np.abs(Bs).max()
     np.testing.assert_allclose(
-        np.swapaxes(E, -1, -2) @ E, np.broadcast_to(np.eye(4), E.shape), atol=1e-14
+        np.swapaxes(V, -1, -2) @ V, np.broadcast_to(np.eye(3), V.shape), atol=1e-14
     )
-    np.testing.assert_allclose(K @ E, E * lam[:, None, :], atol=1e-13 * scale)
-    np.testing.assert_allclose(np.sort(lam), np.linalg.eigvalsh(K), atol=1e-13 * scale)
-    assert (lam[:, 0] >= lam.max(axis=-1) - 1e-13 * scale).all()
+    np.testing.assert_allclose(H @ V, V * s[:, None, :], atol=1e-13 * scale)
+    lam = np.linalg.eigvalsh(np.asarray(davenport_k(jnp.asarray(Bs))))
+    np.testing.assert_allclose(s.sum(-1), lam[:, -1], atol=1e-13 * scale)
+    gaps = s.sum(-1, keepdims=True) - s
+    assert (gaps >= -1e-13 * scale).all()
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
