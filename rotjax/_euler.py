@@ -12,9 +12,9 @@ from ._matrix import _shepperd_divided
 from ._numerics import (
     as_float,
     check_shape,
+    exponent_scale,
     from_scalar_last,
     like_rank,
-    pow2_scale,
     public,
     to_scalar_last,
 )
@@ -176,7 +176,7 @@ def _scaled_pair(u, v):
     """``(u s, v s, s)`` for the power of two ``s`` (exact, no derivative) that brings the
     larger of ``|u|``, ``|v|`` into ``[1, 2)``: their squares then neither underflow nor
     overflow."""
-    s, _ = pow2_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
+    s, _ = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
     return u * s, v * s, s
 
 
@@ -197,7 +197,7 @@ def _hypot(u, v):
     Written on the two scalars rather than as ``safe_norm`` of a stacked pair: XLA:CPU turns
     that reduction into separate loops.
     """
-    s, inv = pow2_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
+    s, inv = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
     u, v = u * s, v * s
     sq = u * u + v * v
     zero = sq == 0
@@ -258,7 +258,7 @@ def _factors(x, y, z, w, seq):
     aq = [jnp.abs(t) for t in (x, y, z, w)]
     big = jnp.maximum(jnp.maximum(aq[0], aq[1]), jnp.maximum(aq[2], aq[3]))
     # (A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
-    scale, _ = pow2_scale(jax.lax.stop_gradient(big))
+    scale, _ = exponent_scale(jax.lax.stop_gradient(big))
     # The scale is applied to a, b, c, d (linear in q; a power of two, so exactly as if applied
     # to q): XLA:CPU then fuses it instead of writing a scaled copy of q.
     a, b, c, d = (scale * t for t in _abcd(x, y, z, w, seq))

@@ -135,7 +135,7 @@ def from_scalar_last(q, scalar_first: bool):
     return jnp.roll(q, 1, axis=-1) if scalar_first else q
 
 
-def pow2_scale(x):
+def exponent_scale(x):
     """``(s, 1 / s)``, powers of two with ``s |x|`` in ``[1, 2)``, for finite normal ``x``.
 
     Read off the exponent field with integer arithmetic, so both are exact and multiplying by
@@ -159,11 +159,11 @@ def pow2_scale(x):
 def unit_scale(big):
     """A power of two ``s`` (exact) that brings a largest magnitude ``big`` into ``[0.5, 2)``:
     1 where it is there already (unit quaternions, rotation matrices: their results are the
-    same bits as unscaled), else that of :func:`pow2_scale`, so that squares and products of
+    same bits as unscaled), else that of :func:`exponent_scale`, so that squares and products of
     the scaled values can neither overflow nor underflow. Piecewise constant: no derivative
     flows through it (the functions scaled by it do not depend on the scale)."""
     big = jax.lax.stop_gradient(big)
-    s, _ = pow2_scale(big)
+    s, _ = exponent_scale(big)
     return jnp.where((big >= 0.5) & (big < 2), jnp.ones_like(s), s)
 
 
@@ -185,7 +185,7 @@ def scaled_norm(x):
     before squaring, and the norm scaled back: no overflow or underflow of the squares (the
     norm of ``(1e-160, 0, 0)`` is ``1e-160``, not 0).
     """
-    s, inv = pow2_scale(jax.lax.stop_gradient(max_abs(*jnp.moveaxis(x, -1, 0))))
+    s, inv = exponent_scale(jax.lax.stop_gradient(max_abs(*jnp.moveaxis(x, -1, 0))))
     return safe_norm(x * s[..., None]) * inv
 
 

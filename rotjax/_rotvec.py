@@ -10,11 +10,11 @@ from ._numerics import (
     as_float,
     check_shape,
     eps,
+    exponent_scale,
     from_scalar_last,
     hat,
     like_rank,
     matmul,
-    pow2_scale,
     public,
     safe_norm,
     to_scalar_last,
@@ -215,7 +215,7 @@ def quaternion_to_axis_angle(q, degrees: bool = False, scalar_first: bool = Fals
     qv = q[..., :3]
     # The vector part scaled on its own (a power of two), so that a tiny one (1e-160 next to
     # w = 1) still gives its direction rather than underflowing to the identity's.
-    s, _ = pow2_scale(jax.lax.stop_gradient(jnp.max(jnp.abs(qv), axis=-1)))
+    s, _ = exponent_scale(jax.lax.stop_gradient(jnp.max(jnp.abs(qv), axis=-1)))
     qv = qv * s[..., None]
     n = safe_norm(qv)
     ident = (n == 0)[..., None]

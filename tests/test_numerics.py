@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from rotjax._matrix import _selected_column
-from rotjax._numerics import pow2_scale, rsqrt
+from rotjax._numerics import exponent_scale, rsqrt
 
 # Exponent ranges of normal numbers, and the documented accuracy of rsqrt.
 RANGE = {np.float32: (-37.5, 38.0), np.float64: (-307.5, 308.0)}
@@ -63,17 +63,17 @@ def test_selected_column_norm_is_in_rsqrt_domain_for_any_finite_matrix(R):
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_pow2_scale_is_exact_and_clamped(dtype):
+def test_exponent_scale_is_exact_and_clamped(dtype):
     info = np.finfo(dtype)
     rng = np.random.default_rng(3)
     e = rng.integers(info.minexp, info.maxexp - 1, 64)
     x = (rng.uniform(1, 2, 64) * 2.0**e).astype(dtype)
     x = np.concatenate([x, [info.tiny, info.max, 1.0, 0.5, 1.9999]]).astype(dtype)
-    s, inv = (np.asarray(v) for v in pow2_scale(jnp.asarray(x)))
+    s, inv = (np.asarray(v) for v in exponent_scale(jnp.asarray(x)))
     assert np.all((np.abs(x * s) >= 1) & (np.abs(x * s) < 2) | (x == info.max)), x * s
     np.testing.assert_array_equal(s.astype(np.float64) * inv.astype(np.float64), 1.0)
     np.testing.assert_array_equal(np.frexp(s)[0], 0.5)  # powers of two: the product is exact
     odd = jnp.asarray([0.0, info.smallest_subnormal, np.inf, np.nan], dtype)
-    s, inv = (np.asarray(v) for v in pow2_scale(odd))
+    s, inv = (np.asarray(v) for v in exponent_scale(odd))
     assert np.all(np.isfinite(s) & (s > 0) & np.isfinite(inv) & (inv > 0))
     assert np.isinf(np.asarray(odd)[2] * s[2])
