@@ -213,15 +213,22 @@ def test_quick_benchmark_writes_json(tmp_path):
 def test_copy_baseline_at_a_bandwidth_bound_batch(tmp_path):
     """At 2^20 rotations (past the caches) quaternion_to_matrix, which writes 9 floats per
     rotation, runs at a sane fraction of the copy kernel that moves the same bytes: a copy
-    kernel doing more or less than a copy moves this ratio out of range."""
-    args = ["--quick", "--out", str(tmp_path), "--ops", "quaternion_to_matrix"]
-    assert cli.main([*args, "--log2-batch", "20"]) == 0
-    _, rows = R.load(tmp_path / "bench.json")
-    copy = [r for r in rows if r["impl"] == "copy"]
-    assert {r["dtype"] for r in copy} == {"float32", "float64"}
-    for r in rows:
-        if r["impl"] == "rotjax":
-            assert 0.05 <= r["vs_copy"] <= 1.5, r
+    kernel doing more or less than a copy moves this ratio out of range. A quick run's three
+    rounds can all be slowed by other work on the machine (the tests run in parallel), so up
+    to three runs: one must be in range, which a wrong copy kernel never is."""
+    missed = []
+    for attempt in range(3):
+        out = tmp_path / str(attempt)
+        args = ["--quick", "--out", str(out), "--ops", "quaternion_to_matrix"]
+        assert cli.main([*args, "--log2-batch", "20"]) == 0
+        _, rows = R.load(out / "bench.json")
+        copy = [r for r in rows if r["impl"] == "copy"]
+        assert {r["dtype"] for r in copy} == {"float32", "float64"}
+        bad = [r for r in rows if r["impl"] == "rotjax" and not 0.05 <= r["vs_copy"] <= 1.5]
+        if not bad:
+            return
+        missed.append([(r["method"], r["dtype"], r["vs_copy"]) for r in bad])
+    pytest.fail(f"vs_copy out of [0.05, 1.5] in three runs: {missed}")
 
 
 def test_copy_kernel_reads_every_input_and_writes_the_output_width():
