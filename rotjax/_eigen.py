@@ -10,7 +10,7 @@ matrix (Bar-Itzhack 2000), Wahba's problem (Davenport's q-method) and the quater
   ``K(B)`` is the quaternion of ``Q = U diag(1, 1, det(U V^T)) V^T`` for the SVD
   ``B = U S V^T``: the rotation that maximises ``tr(Q^T B)``. Its other eigenvectors are
   ``q (x) (v_j, 0)`` (``Q`` composed with a half turn about a right singular vector).
-* Forward: one-sided (Hestenes) Jacobi on the 3x3 ``B``, a fixed number of sweeps, then ``Q``
+* Forward: one-sided (Hestenes) Jacobi on the 3x3 ``B``, a fixed number of rotations, then ``Q``
   from the two largest columns of ``B V`` and their cross product (no division by the smallest
   singular value; ``det B < 0`` and rank-deficient ``B`` included), and Shepperd's extraction.
   ``B`` is first scaled by an exact power of two, so the result does not depend on its scale.
@@ -35,9 +35,13 @@ from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div
 # counts are the fewest that orthogonalise the columns to the rounding level for every matrix
 # of large samples of noisy rotations and random Gaussian matrices, and over near-ties,
 # det < 0, rank-deficient and graded inputs. With the sorting rotations one sweep fewer leaves
-# about 1% of noisy rotations off by 1e2-1e4 eps.
+# about 1% of noisy rotations off by 1e2-1e4 eps. The last sweep leaves out the rotation of the
+# two smaller columns: Q reads their plane only through u_b, whose error from their remaining
+# (second-order) inner product is not divided by a gap, whereas the sweep's other rotations set
+# the largest column, against which every gap is measured.
 _SWEEPS = {jnp.dtype(jnp.float32): 4, jnp.dtype(jnp.float64): 5}
 _PAIRS = ((0, 1), (0, 2), (1, 2))
+
 # The most entries per batch element whose maximum pow2_scale takes elementwise.
 _UNROLL_MAX = 64
 # Batch elements per chunk on the CPU: a chunk's Jacobi state (18 numbers a matrix, a few
@@ -45,6 +49,11 @@ _UNROLL_MAX = 64
 # costs a fixed overhead (one call per loop of the kernel, about 60 loops), so the chunk is as
 # large as that cache allows: 4.5 MiB of state, in either dtype.
 _CHUNK = {jnp.dtype(jnp.float32): 2**16, jnp.dtype(jnp.float64): 2**15}
+
+
+def _schedule(dtype):
+    """The kernel's Jacobi rotations, in order, as column pairs (see ``_SWEEPS``)."""
+    return _PAIRS * (_SWEEPS[jnp.dtype(dtype)] - 1) + _PAIRS[:2]
 
 
 def _pow2_factors(m):
@@ -102,7 +111,7 @@ def pow2_scale(x, axes):
 def _rotation(app, aqq, apq):
     """``(c, s)`` of a Jacobi rotation that zeroes ``a_pq`` of the symmetric 2x2
     ``[[a_pp, a_pq], [a_pq, a_qq]]`` and leaves the larger diagonal entry first: a sorting
-    rotation, so that after the last sweep the columns are in decreasing order of norm.
+    rotation, so that the columns end in decreasing order of norm.
 
     ``t = tan(theta)`` is the smaller root of ``t^2 + 2 tau t - 1 = 0``, ``tau = (a_qq - a_pp) /
     (2 a_pq)`` (Golub & Van Loan 8.5.2), written ``t = 2 a_pq / (d + sign(d) r)``, ``d = a_qq -
@@ -138,20 +147,22 @@ def _cross3(x, y):
 
 
 def _unit_or(w, fallback):
-    """``w / |w|``, or ``fallback`` where ``|w| = 0`` (NaN there for ``fallback=None``)."""
+    """``w / |w|``, or ``fallback`` where ``|w|^2`` is zero or below the normal range, whose
+    reciprocal could overflow (NaN there for ``fallback=None``)."""
     n = _dot3(w, w)
-    if fallback is None:
-        return [x * jnp.sqrt(1.0 / n) for x in w]  # 0 * inf
-    ok = n > 0
+    ok = n >= jnp.finfo(n.dtype).tiny  # NaN is not
     inv = jnp.sqrt(1.0 / jnp.where(ok, n, 1.0))
+    if fallback is None:
+        fallback = [jnp.full_like(n, jnp.nan)] * 3
     return [jnp.where(ok, x * inv, f) for x, f in zip(w, fallback, strict=True)]
 
 
 def _perpendicular(u):
     """A unit vector perpendicular to the unit ``u``: ``u x e_k`` normalised, ``e_k`` the axis
     of ``u``'s smallest component (so ``|u x e_k|^2 >= 2/3``)."""
-    k = jnp.argmin(jnp.abs(jnp.stack(u, axis=-1)), axis=-1)  # one evaluation: see _polar
-    k0, k1 = k == 0, k == 1
+    a = [jnp.abs(x) for x in u]
+    k0 = (a[0] <= a[1]) & (a[0] <= a[2])  # comparisons fuse; an argmin is a loop of its own
+    k1 = ~k0 & (a[1] <= a[2])
     zero = jnp.zeros_like(u[0])
     p = [
         jnp.where(k0, zero, jnp.where(k1, -u[2], u[1])),
@@ -181,17 +192,15 @@ def _polar(B, nan_at_zero=True):
     Bs = pow2_scale(B, (-2, -1))
     eye = jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), Bs.shape)
     S = jnp.concatenate([Bs, eye], axis=-2)
-    for _ in range(_SWEEPS[jnp.dtype(B.dtype)]):
-        for p, q in _PAIRS:
-            cols = [S[..., k] for k in range(3)]
-            wp, wq = cols[p][..., :3], cols[q][..., :3]
-            alpha, beta, gamma = (
-                sum(x[..., i] * y[..., i] for i in range(3))
-                for x, y in ((wp, wp), (wq, wq), (wp, wq))
-            )
-            c, s = (x[..., None] for x in _rotation(alpha, beta, gamma))
-            cols[p], cols[q] = c * cols[p] - s * cols[q], s * cols[p] + c * cols[q]
-            S = jnp.stack(cols, axis=-1)
+    for p, q in _schedule(B.dtype):
+        cols = [S[..., k] for k in range(3)]
+        wp, wq = cols[p][..., :3], cols[q][..., :3]
+        alpha, beta, gamma = (
+            sum(x[..., i] * y[..., i] for i in range(3)) for x, y in ((wp, wp), (wq, wq), (wp, wq))
+        )
+        c, s = (x[..., None] for x in _rotation(alpha, beta, gamma))
+        cols[p], cols[q] = c * cols[p] - s * cols[q], s * cols[p] + c * cols[q]
+        S = jnp.stack(cols, axis=-1)
     (wa, wb, wc), (va, vb, _) = (
         [[S[..., i, j] for i in rows] for j in range(3)] for rows in ((0, 1, 2), (3, 4, 5))
     )
