@@ -29,7 +29,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div
+from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div, select
 
 # One-sided Jacobi converges quadratically (Hestenes 1958; Demmel & Veselic 1992). The sweep
 # counts are the fewest that orthogonalise the columns to the rounding level for every matrix
@@ -77,7 +77,7 @@ def _pow2_factors(m):
     mc = m * c
     exp_bits = jnp.asarray(((1 << info.nexp) - 1) << info.nmant, uint)
     p = jax.lax.bitcast_convert_type(jax.lax.bitcast_convert_type(mc, uint) & exp_bits, dt)
-    nan = jnp.where(jnp.isfinite(m), 1.0, jnp.asarray(jnp.nan, dt))
+    nan = select(jnp.isfinite(m), 1.0, jnp.nan, dt)
     den = jnp.where((mc > 0) & jnp.isfinite(mc), p, 1.0)
     f = jnp.stack([c * nan, 0.5 * nan], -1) / jnp.stack([jnp.ones_like(den), den], -1)
     return f[..., 0], f[..., 1]
@@ -131,7 +131,7 @@ def _rotation(app, aqq, apq):
     den = jnp.where(keep, d - r, 2.0 * apq)
     zero = den == 0  # a_pq = 0 <= d: swap (0 = d = r: nothing to do)
     big = 1.0 / eps(app.dtype) ** 2  # c ~ eps^2: a swap to well below the rounding level
-    swap = jnp.where(num == 0, 0.0, jnp.asarray(-big, num.dtype))  # typed: not a float64 array
+    swap = select(num == 0, 0.0, -big, num.dtype)
     t = jnp.where(zero, swap, num) / jnp.where(zero, 1.0, den)
     t = jnp.clip(t, -big, big)  # a_pq tiny but not 0: t^2 must not overflow (c = s = 0)
     c = jnp.sqrt(1.0 / (1.0 + t * t))

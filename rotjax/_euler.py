@@ -16,6 +16,7 @@ from ._numerics import (
     from_scalar_last,
     like_rank,
     public,
+    select,
     to_scalar_last,
 )
 from ._quaternion import _multiply, _to_matrix
@@ -140,14 +141,15 @@ def _atan2(y, x):
     k = jnp.where(big, 1, 0)
     k = jnp.where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
     k = jnp.where(xneg, 4 - k, k)  # pi - (...) for x < 0
-    sign = jnp.where(swap != xneg, -1, 1).astype(x.dtype)
+    sign = select(swap != xneg, -1, 1, x.dtype)
     hi, lo = _QUARTER_PI[size]
 
     def octant(vals):
+        vals = [jnp.asarray(c, x.dtype) for c in vals]  # exact: rounded to this dtype
         v = jnp.where(k == 1, vals[1], vals[0])
         v = jnp.where(k == 2, vals[2], v)
         v = jnp.where(k == 3, vals[3], v)
-        return jnp.where(k == 4, vals[4], v).astype(x.dtype)
+        return jnp.where(k == 4, vals[4], v)
 
     a = octant(hi) + (octant(lo) + sign * r)
     a = jnp.where(jnp.signbit(y), -a, a)
@@ -185,7 +187,7 @@ def _lifted(u, v):
     ``2^-k``: products with components of order 1 down to eps then stay normal."""
     k = 2 ** (jnp.finfo(u.dtype).nexp - 2)
     low = jnp.maximum(jnp.abs(u), jnp.abs(v)) < 2.0**-k
-    f = jnp.where(low, 2.0**k, 1.0).astype(u.dtype)
+    f = select(low, 2.0**k, 1.0, u.dtype)
     return u * f, v * f
 
 

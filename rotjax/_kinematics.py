@@ -41,6 +41,7 @@ from ._numerics import (
     matmul,
     matvec,
     public,
+    select,
     to_scalar_last,
     vee,
 )
@@ -789,7 +790,7 @@ def unwrap_quaternion(q, axis: int = 0, scalar_first: bool = False):
     prev = jnp.concatenate([jnp.full_like(last[:1], -1), last[:-1]], axis=0)  # < k
     ref = jnp.take_along_axis(x, jnp.maximum(prev, 0)[..., None], axis=0)
     dot = jnp.sum(jnp.where(ok[..., None], x, 0.0) * jnp.where(prev[..., None] >= 0, ref, 0.0), -1)
-    sign = jnp.where(dot < 0, -1.0, 1.0).astype(x.dtype)
+    sign = select(dot < 0, -1.0, 1.0, x.dtype)
     flips = jnp.cumprod(sign, axis=0)
     out = jnp.where(ok[..., None], x * flips[..., None], x)  # bad samples as given
     return jnp.moveaxis(out, 0, axis).astype(dt)

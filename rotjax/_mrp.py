@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._numerics import as_float, check_shape, from_scalar_last, public, to_scalar_last
+from ._numerics import as_float, check_shape, from_scalar_last, public, select, to_scalar_last
 
 
 @public
@@ -29,7 +29,7 @@ def quaternion_to_mrp(q, scalar_first: bool = False):
     q = to_scalar_last(q, scalar_first)
     n = jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))  # zero quaternion: 0/0 = NaN
     w = q[..., 3:]
-    s = jnp.where(w < 0, -1.0, 1.0).astype(q.dtype)
+    s = select(w < 0, -1.0, 1.0, q.dtype)
     return (s * q[..., :3] / (n + s * w)).astype(dt)
 
 

@@ -167,6 +167,13 @@ def unit_scale(big):
     return jnp.where((big >= 0.5) & (big < 2), jnp.ones_like(s), s)
 
 
+def select(cond, a, b, dtype):
+    """``jnp.where(cond, a, b)`` for Python numbers ``a`` and ``b``, as an array of ``dtype``.
+    On two Python numbers ``jnp.where`` makes an array of the default type, float64 with x64 on,
+    which a float32 program would then compute and convert in every loop that reads it."""
+    return jnp.where(cond, jnp.asarray(a, dtype), jnp.asarray(b, dtype))
+
+
 def max_abs(*xs):
     """Elementwise largest ``|x|`` over per-element arrays (``jnp.maximum``, not ``jnp.max``
     over a stacked axis: XLA:CPU splits a reduction into loops of its own). A NaN operand gives

@@ -474,3 +474,35 @@ def test_euler_float32_derivatives_stay_float32(fn):
     g = jax.grad(lambda v: jnp.sum(f(v)))(x32)
     assert jv.dtype == jnp.float32 and g.dtype == jnp.float32
     assert_close(g, jax.grad(lambda v: jnp.sum(f(v)))(jnp.asarray(x)), atol=1e-5)
+
+
+_F32_PROGRAMS = {
+    "quaternion_to_matrix": (rj.quaternion_to_matrix, "q"),
+    "matrix_to_quaternion": (rj.matrix_to_quaternion, "R"),
+    "optimal": (lambda m: rj.matrix_to_quaternion(m, method="optimal"), "R"),
+    "markley": (lambda m: rj.matrix_to_quaternion(m, method="markley"), "R"),
+    "quaternion_to_rotvec": (rj.quaternion_to_rotvec, "q"),
+    "rotvec_to_quaternion": (rj.rotvec_to_quaternion, "v"),
+    "quaternion_to_euler": (lambda q: rj.quaternion_to_euler(q, "ZYX"), "q"),
+    "matrix_to_euler": (lambda m: rj.matrix_to_euler(m, "zxz"), "R"),
+    "euler_to_quaternion": (lambda a: rj.euler_to_quaternion(a, "ZYX"), "v"),
+    "quaternion_to_mrp": (rj.quaternion_to_mrp, "q"),
+    "mrp_to_quaternion": (rj.mrp_to_quaternion, "v"),
+    "nined_to_matrix": (lambda m: rj.nined_to_matrix(m.reshape(-1, 9)), "R"),
+    "align_vectors": (lambda m: rj.align_vectors(m, m[..., ::-1, :]), "R"),
+    "quaternion_mean": (lambda q: rj.quaternion_mean(q.reshape(4, 4, 4)), "q"),
+    "unwrap_quaternion": (rj.unwrap_quaternion, "q"),
+}
+
+
+@pytest.mark.parametrize("name", list(_F32_PROGRAMS))
+def test_float32_programs_hold_no_float64_array(name):
+    """With x64 on, a float32 call compiles to float32 arithmetic, forward and jit(grad): a
+    float64 array (e.g. ``jnp.where`` on two Python numbers) would be computed and converted in
+    every loop that reads it."""
+    f, kind = _F32_PROGRAMS[name]
+    q = jnp.asarray(np.random.default_rng(5).normal(size=(16, 4)), jnp.float32)
+    x = {"q": q, "R": rj.quaternion_to_matrix(q), "v": q[:, :3]}[kind]
+    for g in (jax.jit(f), jax.jit(jax.grad(lambda x: jnp.sum(f(x))))):
+        hlo = g.lower(x).compile().as_text()
+        assert "f64[" not in hlo, [line for line in hlo.splitlines() if "f64[" in line][:3]
