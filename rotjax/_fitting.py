@@ -58,19 +58,17 @@ def _sum_outer(x, y, fx, fy):
     :func:`pow2_factors`, or empty), applied inside the products so that they can neither
     underflow nor overflow.
 
-    For a few vectors every entry is a sum of products, all in one loop over the batch that
-    reads the inputs once (XLA:CPU runs a batched ``dot`` of such small matrices several times
+    For a few vectors, a sum of broadcast outer products: one loop over the batch that reads
+    the inputs once (XLA:CPU runs a batched ``dot`` of such small matrices several times
     slower, and scaled copies of the inputs would be written and read again); for many, an
     ``einsum``. The derivative (:func:`_outer_tangent`) is written so that its transpose, the
     reverse mode, is elementwise too."""
-    n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
     if not _unrolled(x, y):
         return _einsum_outer(*_scaled_pair(x, y, fx, fy))
     x, y, fx, fy = _broadcast_batch(x, y, fx, fy)
-    xs = [[_scaled(x[..., k, i], fx) for i in range(p)] for k in range(n)]
-    ys = [[_scaled(y[..., k, j], fy) for j in range(r)] for k in range(n)]
-    rows = [[sum(xs[k][i] * ys[k][j] for k in range(n)) for j in range(r)] for i in range(p)]
-    return jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
+    fx, fy = ([f[..., None, None] for f in fs] for fs in (fx, fy))
+    n = x.shape[-2]
+    return sum(_scaled(x[..., k, :, None], fx) * _scaled(y[..., k, None, :], fy) for k in range(n))
 
 
 def _unrolled(x, y):
