@@ -69,8 +69,10 @@ def _conjugate(q):
 
 
 def _normalize(q):
-    # 0/0 = NaN for the zero quaternion, on purpose: it is not a rotation.
-    return q / jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))
+    # 0/0 = NaN for the zero quaternion, on purpose: it is not a rotation. The squared norm as
+    # a sum of four squares: XLA:CPU runs a reduction over the last axis as a loop of its own.
+    x, y, z, w = jnp.moveaxis(q, -1, 0)
+    return q / jnp.sqrt(x * x + y * y + z * z + w * w)[..., None]
 
 
 def _to_matrix(q):

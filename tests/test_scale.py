@@ -270,3 +270,28 @@ _JAC_R = jax.jit(
     lambda rs, seq: jax.vmap(jax.jacrev(lambda m: rj.matrix_to_euler(m, seq)))(rs),
     static_argnums=1,
 )
+
+
+@pytest.mark.parametrize("dtype", list(SCALES))
+def test_quaternion_mean_is_scale_invariant(dtype):
+    """Each quaternion of a set at its own scale, over the whole range: the mean of the
+    unit-scale set, with and without weights."""
+    rng = np.random.default_rng(47)
+    q = rj.quaternion_multiply(Q[:1], random_quaternions(5, seed=48) * [0.1, 0.1, 0.1, 1.0])
+    q = np.asarray(q).astype(dtype)
+    w = rng.uniform(0.5, 2.0, size=5).astype(dtype)
+    eps = np.finfo(dtype).eps
+    for s in SCALES[dtype]:
+        scales = (s * 10.0 ** rng.uniform(-3, 3, size=(5, 1))).astype(dtype)
+        for weights in (None, w):
+            want = np.asarray(rj.quaternion_mean(q, weights))
+            got = np.asarray(rj.quaternion_mean(q * scales, weights))
+            assert_close(got, want, atol=8 * eps, err_msg=f"scale {s:g}")
+
+
+@pytest.mark.parametrize("bad", sorted(BAD_QUATERNIONS))
+def test_quaternion_mean_gives_nan_for_a_non_rotation_in_its_own_set(bad):
+    sets = np.stack([Q[:4], Q[4:], Q[2:6], Q[1:5]])
+    bad_set = sets[2].copy()
+    bad_set[1] = BAD_QUATERNIONS[bad]
+    _assert_nan_in_its_own_element(jax.jit(rj.quaternion_mean), sets, bad_set)
