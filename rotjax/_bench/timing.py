@@ -44,13 +44,14 @@ def timed(f, x):
     return time.perf_counter() - t
 
 
-def throughput_group(entries, rounds, slow_s=1.0, slow_rounds=3):
+def throughput_group(entries, rounds, slow_s=1.0, slow_rounds=7):
     """Interleaved rounds over every contender; returns ``{key: {round: seconds}}``.
 
     ``entries``: ``{key: (callable, input)}``. The order is rotated every round so that no
     contender always runs right after the same neighbour. A contender slower than ``slow_s`` per
     call (an eigendecomposition per matrix, say) sits out after ``slow_rounds`` rounds; its
-    ratios are then medians over the rounds it ran in.
+    ratios are then medians over the rounds it ran in: seven by default, which take about as
+    long as a burst of a shared machine (10-20 s), so that one burst rarely decides the median.
     """
     keys = list(entries)
     times = {k: {} for k in keys}
