@@ -65,10 +65,8 @@ def _sum_outer(x, y, fx, fy):
     reverse mode, is elementwise too."""
     if not _unrolled(x, y):
         return _einsum_outer(*_scaled_pair(x, y, fx, fy))
-    x, y, fx, fy = _broadcast_batch(x, y, fx, fy)
-    fx, fy = ([f[..., None, None] for f in fs] for fs in (fx, fy))
-    n = x.shape[-2]
-    return sum(_scaled(x[..., k, :, None], fx) * _scaled(y[..., k, None, :], fy) for k in range(n))
+    xs, ys = _scaled_pair(*_broadcast_batch(x, y, fx, fy))
+    return sum(xs[..., k, :, None] * ys[..., k, None, :] for k in range(xs.shape[-2]))
 
 
 def _unrolled(x, y):
