@@ -34,7 +34,7 @@ from ._numerics import (
     to_scalar_last,
     vee,
 )
-from ._quaternion import _conjugate, _multiply, _normalize, _prescaled
+from ._quaternion import _conjugate, _multiply, _normalize
 from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
 
 ALIGN_METHODS = ("svd", "q-method")
@@ -395,7 +395,7 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
         raise ValueError(f"q: expected shape (..., N, 4), got {tuple(q.shape)}")
     if q.shape[-2] == 0:
         raise ValueError("q: the mean of an empty set (N = 0) is undefined")
-    q = _normalize(_prescaled(to_scalar_last(q, scalar_first)))  # any finite scale
+    q = _normalize(to_scalar_last(q, scalar_first))
     if weights is not None and (weights.ndim < 1 or weights.shape[-1] != q.shape[-2]):
         raise ValueError(f"weights: expected shape (..., {q.shape[-2]}), got {weights.shape}")
     qw = q if weights is None else q * pow2_scale(weights, (-1,))[..., None]

@@ -45,7 +45,7 @@ from ._numerics import (
     to_scalar_last,
     vee,
 )
-from ._quaternion import _conjugate, _multiply, _normalize
+from ._quaternion import _conjugate, _multiply, _normalize, _prescaled, _renormalize
 from ._rotvec import _rotvec_to_quat
 
 FRAMES = ("body", "world")
@@ -445,7 +445,7 @@ def integrate_angular_velocity(
     """
     q, w, out_dt = _propagation_args(q, omega, frame, method, METHODS, "q")
     h = like_rank(jnp.asarray(dt).astype(q.dtype)[..., None], q)
-    q = to_scalar_last(q, scalar_first)
+    q = _prescaled(to_scalar_last(q, scalar_first))  # q_next is then of order 1 too
     if method == "exponential":
         dq = _rotvec_to_quat(w * h)
         q_next = _multiply(q, dq) if frame == "body" else _multiply(dq, q)
@@ -461,7 +461,7 @@ def integrate_angular_velocity(
         k3 = f(q + h / 2 * k2)
         k4 = f(q + h * k3)
         q_next = q + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return from_scalar_last(_normalize(q_next), scalar_first).astype(out_dt)
+    return from_scalar_last(_renormalize(q_next), scalar_first).astype(out_dt)
 
 
 # --- continuous Euler angles -------------------------------------------------------------------
@@ -749,7 +749,7 @@ def integrate_angular_velocity_samples(
     else:  # q_k = dq_{k-1} ... dq_0 q0
         prods = jax.lax.associative_scan(lambda x, y: _multiply(y, x), dq, axis=0)
         qs = _multiply(prods, q[None])
-    out = jnp.concatenate([q[None], _normalize(qs)], axis=0)
+    out = jnp.concatenate([q[None], _renormalize(qs)], axis=0)
     return from_scalar_last(out, scalar_first).astype(out_dt)
 
 

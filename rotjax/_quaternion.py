@@ -69,8 +69,16 @@ def _conjugate(q):
 
 
 def _normalize(q):
-    # 0/0 = NaN for the zero quaternion, on purpose: it is not a rotation. The squared norm as
-    # a sum of four squares: XLA:CPU runs a reduction over the last axis as a loop of its own.
+    """``q / |q|`` for ``q`` at any finite scale (:func:`_prescaled` first); NaN for the zero
+    quaternion (0/0, on purpose: it is not a rotation) and for a non-finite component."""
+    return _renormalize(_prescaled(q))
+
+
+def _renormalize(q):
+    """``q / |q|`` for ``q`` of order 1, computed from unit or prescaled quaternions (a step of
+    an integrator, a product): no scaling, whose cost would be that of the step. The squared
+    norm is a sum of four squares: XLA:CPU runs a reduction over the last axis as a loop of its
+    own."""
     x, y, z, w = jnp.moveaxis(q, -1, 0)
     return q / jnp.sqrt(x * x + y * y + z * z + w * w)[..., None]
 
@@ -183,7 +191,7 @@ def quaternion_normalize(q, scalar_first: bool = False):
         ``(..., 4)`` unit quaternion, in the same layout.
     """
     q, dt = _prep(q, scalar_first)
-    return from_scalar_last(_normalize(_prescaled(q)), scalar_first).astype(dt)
+    return from_scalar_last(_normalize(q), scalar_first).astype(dt)
 
 
 @public
@@ -227,7 +235,7 @@ def relative_rotation(q_a, q_b, scalar_first: bool = False):
         ``(..., 4)`` unit quaternion of the relative rotation (sign as produced by the product).
     """
     qa, qb, dt = _prep2(q_a, q_b, scalar_first, ("q_a", "q_b"))
-    rel = _normalize(_multiply(_conjugate(_prescaled(qa)), _prescaled(qb)))
+    rel = _renormalize(_multiply(_conjugate(_prescaled(qa)), _prescaled(qb)))
     return from_scalar_last(rel, scalar_first).astype(dt)
 
 

@@ -4,6 +4,8 @@ answer, to a few eps, for ``s q`` and ``s R`` as for ``q`` and ``R`` (float32 fr
 zero matrix and any non-finite component give NaN in their own batch element only; and the
 Euler angles' gradients stay finite and right at every distance from gimbal lock."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -25,6 +27,11 @@ P = random_quaternions(8, seed=42)
 R = np.asarray(rj.quaternion_to_matrix(Q))
 V = np.random.default_rng(43).normal(size=(8, 3))
 
+
+def _integrate(q, method):
+    return rj.integrate_angular_velocity(q, V.astype(q.dtype), 0.1, method=method)
+
+
 QUATERNION_FUNCTIONS = {
     "quaternion_to_matrix": rj.quaternion_to_matrix,
     "quaternion_to_euler_ZXZ": lambda q: rj.quaternion_to_euler(q, "ZXZ"),
@@ -38,7 +45,20 @@ QUATERNION_FUNCTIONS = {
     "quaternion_apply": lambda q: rj.quaternion_apply(q, V.astype(q.dtype)),
     "quaternion_normalize": rj.quaternion_normalize,
     "relative_rotation": lambda q: rj.relative_rotation(q, P.astype(q.dtype)),
+    "slerp_from": lambda q: rj.slerp(q, P.astype(q.dtype), 0.3),
+    "slerp_to": lambda q: rj.slerp(P.astype(q.dtype), q, 0.3),
+    "quaternion_reduce": lambda q: rj.quaternion_reduce(q, left=P[:3].astype(q.dtype))[0],
+    **{
+        f"integrate_{m}": functools.partial(_integrate, method=m)
+        for m in ("euler", "exponential", "rk4")
+    },
+    "integrate_samples": lambda q: jnp.moveaxis(
+        rj.integrate_angular_velocity_samples(q, jnp.stack([V, -V, V]).astype(q.dtype), 0.1), 0, 1
+    ),
 }
+# Functions linear in q: -q gives the negated output.
+SIGNED = {"quaternion_normalize", "relative_rotation", "slerp_from", "quaternion_reduce"}
+SIGNED |= {name for name in QUATERNION_FUNCTIONS if name.startswith("integrate")}
 MATRIX_FUNCTIONS = {
     "matrix_to_quaternion_shepperd": rj.matrix_to_quaternion,
     "matrix_to_quaternion_markley": lambda m: rj.matrix_to_quaternion(m, method="markley"),
@@ -76,7 +96,7 @@ def test_quaternion_functions_are_scale_invariant(dtype, scale):
         _assert_same(name, f(q * dtype(scale)), f(q), 8 * eps)
         # -q is the same rotation (the last one, 180 degrees, where some outputs jump, left out)
         want = np.asarray(f(q))[:-1]
-        want = -want if name in ("quaternion_normalize", "relative_rotation") else want
+        want = -want if name in SIGNED else want
         got = np.asarray(f(q * dtype(-scale)))[:-1]
         _assert_same(name, got, want, 8 * eps)
     got = np.asarray(jax.jit(_both_angle_args)(q * dtype(scale)))
