@@ -5,6 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ._numerics import as_float, check_shape, from_scalar_last, public, select, to_scalar_last
+from ._quaternion import _prescaled
 
 
 @public
@@ -26,7 +27,7 @@ def quaternion_to_mrp(q, scalar_first: bool = False):
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
-    q = to_scalar_last(q, scalar_first)
+    q = _prescaled(to_scalar_last(q, scalar_first))  # any finite scale: |q|^2 stays in range
     n = jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))  # zero quaternion: 0/0 = NaN
     w = q[..., 3:]
     s = select(w < 0, -1.0, 1.0, q.dtype)

@@ -45,6 +45,7 @@ QUATERNION_FUNCTIONS = {
     "quaternion_apply": lambda q: rj.quaternion_apply(q, V.astype(q.dtype)),
     "quaternion_normalize": rj.quaternion_normalize,
     "relative_rotation": lambda q: rj.relative_rotation(q, P.astype(q.dtype)),
+    "quaternion_to_mrp": rj.quaternion_to_mrp,
     "slerp_from": lambda q: rj.slerp(q, P.astype(q.dtype), 0.3),
     "slerp_to": lambda q: rj.slerp(P.astype(q.dtype), q, 0.3),
     "quaternion_reduce": lambda q: rj.quaternion_reduce(q, left=P[:3].astype(q.dtype))[0],
