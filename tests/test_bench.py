@@ -6,6 +6,7 @@ digits on the exact values of the (rounded) inputs.
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import jax
@@ -196,7 +197,8 @@ def test_quick_benchmark_writes_json(tmp_path):
     meta, rows = R.load(tmp_path / "bench.json")
     assert meta["quick"] is True and meta["batch"] == 1 << 16
     assert meta["device"].startswith(jax.default_backend() + ": ")
-    assert meta["malloc_env"]["MALLOC_MMAP_THRESHOLD_"] is not None
+    # glibc's default malloc settings unless the caller's environment sets them (--pin-malloc)
+    assert meta["malloc_env"] == {k: os.environ.get(k) for k in cli.MALLOC_ENV}
     assert meta["versions"]["jax"] == jax.__version__
     assert rows and all(set(r) == set(R.COLUMNS) for r in rows)
     m2q = [r for r in rows if r["op"] == "matrix_to_quaternion" and r["dtype"] == "float32"]
@@ -204,10 +206,65 @@ def test_quick_benchmark_writes_json(tmp_path):
     assert not any(r["impl"] == "copy" or r["vs_copy"] is not None for r in rows)
     for r in rows:
         assert r["mrot_s"] > 0
-        if r["impl"] == "rotjax":
+        if r["impl"] in ("rotjax", "scipy-jax"):
             assert r["err_max_eps"] is not None and r["err_by_set"]
+    # scipy on JAX arrays is a peer of every conversion, in both dtypes, next to scipy on NumPy
+    for op in ("matrix_to_quaternion", "quaternion_to_euler"):
+        for dt in ("float32", "float64"):
+            impls = {r["impl"] for r in rows if r["op"] == op and r["dtype"] == dt}
+            assert {"scipy-jax", "scipy", "jax.scipy", "jaxlie"} <= impls, (op, dt)
     assert (tmp_path / "bench.txt").read_text().startswith("operation")
-    assert R.plot_digest(tmp_path / "bench.png") == R.digest(meta, rows)
+    assert [p.name for p in sorted(tmp_path.glob("bench-*.png"))] == [
+        "bench-m2q-noisy.png",
+        "bench-m2q.png",
+        "bench-q2e.png",
+    ]
+    for png in tmp_path.glob("bench-*.png"):
+        assert R.plot_digest(png) == R.digest(meta, rows)
+
+
+_SCIPY_ON_JAX = """
+import jax, jax.numpy as jnp, numpy as np
+jax.config.update("jax_enable_x64", True)
+from rotjax._bench import cases as C
+import rotjax as rj
+peers = C.peers()
+print("scipy-jax" in peers)
+if "scipy-jax" in peers:
+    x = jnp.asarray(np.random.default_rng(0).normal(size=(64, 4)), jnp.float32)
+    for c in C.CASES["quaternion_to_matrix"].contenders(peers):
+        if c.impl == "scipy-jax":
+            text = jax.jit(c.fn).lower(x).as_text()
+            out = jax.jit(c.fn)(x)
+            err = float(jnp.abs(out - rj.quaternion_to_matrix(x)).max())
+            print(out.dtype, "callback" in text, err)
+"""
+
+
+@pytest.mark.parametrize("flag", ["1", None])
+def test_scipy_on_jax_is_a_jitted_peer_only_with_the_array_api(flag):
+    """With SCIPY_ARRAY_API=1 scipy's Rotation is a peer on JAX arrays: traced by jax.jit into
+    one XLA program (no host callback), keeping float32, with rotjax's results; without it,
+    scipy converts to NumPy, and the peer is left out rather than timed on NumPy."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = {k: v for k, v in os.environ.items() if k != "SCIPY_ARRAY_API"}
+    if flag:
+        env["SCIPY_ARRAY_API"] = flag
+    root = Path(__file__).resolve().parent.parent
+    env["PYTHONPATH"] = os.pathsep.join([str(root), env.get("PYTHONPATH", "")])
+    res = subprocess.run(
+        [sys.executable, "-c", _SCIPY_ON_JAX], env=env, capture_output=True, text=True, check=True
+    )
+    lines = res.stdout.split("\n")
+    if not flag:
+        assert lines[0] == "False"
+        return
+    assert lines[0] == "True"
+    dtype, callback, err = lines[1].split()
+    assert dtype == "float32" and callback == "False" and float(err) < 1e-6
 
 
 def test_copy_baseline_at_a_bandwidth_bound_batch(tmp_path):
@@ -279,10 +336,23 @@ def test_report_generates_and_checks(tmp_path):
     assert cli.main(argv) == 0
     assert cli.main([*argv, "--check"]) == 0
     head = (out / "_generated" / "headline.md").read_text()
-    assert "| matrix_to_quaternion | 100 Mrot/s, 0.5 eps | - | 3x, 2.5 eps | 4x, 3.5 eps |" in head
-    assert "TestCPU" in head and "numpy 0.1" in head and "2000-01-01" in head
+    # rotjax's speed over each peer's (3x: jaxlie ran at a third of rotjax's speed), both dtypes
+    assert "| rotjax speed ÷ jaxlie | rotjax speed ÷ scipy on NumPy |" in head
+    assert "| matrix_to_quaternion | float32 | 100 | 3x | 4x |" in head
+    assert "| matrix_to_quaternion | float64 | 100 | 3x | 4x |" in head
+    assert "| matrix_to_quaternion | float64 | 0.5 | 2.5 | 3.5 |" in head  # errors in eps
+    assert "TestCPU" in head and "2000-01-01" in head and "glibc's default malloc" in head
+    machine = (out / "_generated" / "machine.md").read_text()
+    assert machine.count("TestCPU") == 1 and "numpy 0.1" in machine and "malloc" in machine
     table = (out / "_generated" / "bench_table.md").read_text()
-    assert table.count("\n| ") == len(rows) + 1  # header and one line per row
+    assert table.count("### ") == 2  # a section per operation
+    assert table.count("TestCPU") == 2 and table.count("2000-01-01") == 2  # a caption each
+    main = [ln for ln in table.split("\n") if ln.startswith("| ")]
+    folded = [ln for ln in table.split("\n") if ln.startswith("    | ")]
+    assert len(main) == len(rows) + 2  # header and one line per row, per operation
+    assert len(folded) == len([r for r in rows if r["impl"] != "copy"]) + 2  # no copy rows
+    assert max(ln.strip().count(" | ") + 1 for ln in main + folded) == 7  # columns per table
+    assert "| jaxlie | float32 | 33.3 | 3.00 |" in table  # rotjax speed ÷ this
     text = readme.read_text()
     assert text.startswith("intro\n") and text.endswith(f"{R.README_END}\nrest\n")
     assert "old" not in text and head in text
@@ -293,7 +363,7 @@ def test_report_generates_and_checks(tmp_path):
         str(out / "_generated" / "bench_table.md"),
         str(out / "_generated" / "headline.md"),
         str(readme),
-        str(out / "bench.png"),
+        *(str(out / f"bench-{p[0]}.png") for p in R.PANELS),
     }
     assert cli.main([*argv, "--check"]) == 1
     assert cli.main(argv) == 0 and cli.main([*argv, "--check"]) == 0
@@ -303,18 +373,23 @@ def test_readme_without_markers_is_left_alone(tmp_path):
     assert R.readme_block("no markers here\n", "block") is None
 
 
-def test_plot_labels_unique_and_markers_per_dtype():
+@pytest.mark.parametrize("panel", R.PANELS, ids=[p[0] for p in R.PANELS])
+def test_plot_labels_unique_and_markers_per_dtype(panel):
+    """One figure per panel, drawn at the width the docs show it, with legible text."""
     meta, rows = _synthetic()
-    fig = R.figure(meta, rows)
+    fig = R.figure(meta, rows, panel)
     try:
+        assert round(fig.get_figwidth() * fig.dpi) == R.PLOT_WIDTH_PX
         labels = [t.get_text() for leg in fig.legends for t in leg.get_texts()]
         assert len(labels) == len(set(labels))
         assert {"float32", "float64", "bfloat16", "float16"} <= set(labels)
-        assert {"rotjax:shepperd", "rotjax:markley", "jaxlie", "scipy"} <= set(labels)
+        assert {"rotjax:shepperd", "rotjax:markley", "jaxlie", "scipy on NumPy"} <= set(labels)
         assert len(set(R.MARKERS.values())) == len(R.MARKERS)
+        assert min(t.get_fontsize() for leg in fig.legends for t in leg.get_texts()) >= 9
         for ax in fig.axes:
             assert not ax.texts  # no labels drawn on the points
             assert "(" in ax.get_xlabel() and "(" in ax.get_ylabel()  # units
+            assert ax.xaxis.label.get_fontsize() >= 9 and ax.yaxis.label.get_fontsize() >= 9
         assert "TestCPU" in fig._suptitle.get_text() and "2000-01-01" in fig._suptitle.get_text()
     finally:
         import matplotlib.pyplot as plt
@@ -322,12 +397,23 @@ def test_plot_labels_unique_and_markers_per_dtype():
         plt.close(fig)
 
 
+def test_allocator_is_named():
+    assert R.allocator({"malloc_env": dict.fromkeys(cli.MALLOC_ENV)}) == (
+        "glibc's default malloc settings"
+    )
+    assert "pinned at 1 GiB" in R.allocator({"malloc_env": cli.MALLOC_ENV})
+    other = {"malloc_env": {"MALLOC_TRIM_THRESHOLD_": "7"}}
+    assert "MALLOC_TRIM_THRESHOLD_=7" in R.allocator(other)
+
+
 def test_committed_docs_are_generated_from_bench_json():
-    """docs/_generated/*.md and docs/bench.png are current with docs/bench.json."""
+    """docs/_generated/*.md and docs/bench-*.png are current with docs/bench.json, and the
+    GPU page's with docs/bench-h100.json."""
     from pathlib import Path
 
     docs = Path(__file__).resolve().parent.parent / "docs"
     assert R.generate(docs / "bench.json", docs, check=True) == []
+    assert R.generate(docs / "bench-h100.json", docs, suffix="-h100", check=True) == []
 
 
 def test_unknown_operation_is_rejected(tmp_path):

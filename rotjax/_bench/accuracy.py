@@ -435,11 +435,18 @@ def euler_call(fn, impl, x, seq, jnp_dtype):
     if impl == "rotjax":
         f = rj.quaternion_to_euler if quat else rj.matrix_to_euler
         return np.asarray(f(jnp.asarray(x, dtype=jnp_dtype), seq)).astype(np.float64)
-    if impl == "jax.scipy":
-        from jax.scipy.spatial.transform import Rotation as JR
+    if impl in ("jax.scipy", "scipy-jax"):
+        if impl == "jax.scipy":
+            from jax.scipy.spatial.transform import Rotation as JR
+
+            kw = {}
+        else:  # scipy on JAX arrays, as timed (see cases.scipy_like)
+            from scipy.spatial.transform import Rotation as JR
+
+            kw = {"assume_valid": True}
 
         def f(xj):
-            r = JR.from_quat(xj) if quat else JR.from_matrix(xj)
+            r = JR.from_quat(xj) if quat else JR.from_matrix(xj, **kw)
             return r.as_euler(seq)
 
         return np.asarray(jax.jit(f)(jnp.asarray(x, dtype=jnp_dtype)), np.float64)

@@ -19,7 +19,7 @@ SEQ = "xyz"  # throughput sequence (extrinsic roll-pitch-yaw, jaxlie's); accurac
 
 
 class Contender(NamedTuple):
-    impl: str  # "rotjax", a peer's name ("scipy", "jax.scipy", "jaxlie")
+    impl: str  # "rotjax", a peer's name ("scipy", "scipy-jax", "jax.scipy", "jaxlie")
     method: str  # rotjax's method=, or ""
     fn: Callable  # input batch -> output batch
     traceable: bool  # jitted and differentiated (False: called on NumPy arrays)
@@ -100,12 +100,16 @@ INPUTS = {
 
 
 def peers():
-    """Importable peers, by name."""
+    """Importable peers, by name. ``"scipy-jax"`` is scipy's ``Rotation`` on JAX arrays, present
+    when scipy was imported with ``SCIPY_ARRAY_API=1`` (the benchmark's child process sets it)
+    and keeps a JAX array a JAX array; ``"scipy"`` is the same class on NumPy arrays."""
     out = {}
     try:
         from scipy.spatial.transform import Rotation
 
         out["scipy"] = Rotation
+        if scipy_accepts_jax(Rotation):
+            out["scipy-jax"] = Rotation
     except ImportError:  # pragma: no cover - scipy is a bench extra
         pass
     try:
@@ -123,6 +127,20 @@ def peers():
     return out
 
 
+def scipy_accepts_jax(Rotation) -> bool:
+    """Whether ``Rotation`` computes on JAX arrays, under ``jax.jit`` (scipy >= 1.17 with
+    ``SCIPY_ARRAY_API=1`` set before scipy was first imported); otherwise it converts them to
+    NumPy, and a traced array fails the conversion."""
+    import jax
+    import jax.numpy as jnp
+
+    try:
+        out = jax.jit(lambda q: Rotation.from_quat(q).as_matrix())(jnp.eye(4)[3:])
+    except Exception:  # noqa: BLE001 - any failure means: not on JAX arrays
+        return False
+    return isinstance(out, jax.Array)
+
+
 def rotjax_fn(name, method="", *args):
     """rotjax's function ``name`` as a contender: ``f(x, *args, method=method)``."""
     import rotjax as rj
@@ -133,14 +151,24 @@ def rotjax_fn(name, method="", *args):
 
 
 def scipy_like(peers, build: str, read: str, *args):
-    """jax.scipy and scipy as ``Rotation.<build>(x).<read>(*args)``."""
+    """jax.scipy, scipy on JAX arrays and scipy on NumPy arrays as
+    ``Rotation.<build>(x).<read>(*args)``.
+
+    scipy on JAX arrays builds from a matrix with ``assume_valid=True``: under ``jit`` its
+    default projects every matrix by an SVD (an eager call does so only where the matrix is not
+    orthogonal), which rotjax's conversions do not do either.
+    """
     out = []
-    for name, traceable in (("jax.scipy", True), ("scipy", False)):
+    for name, traceable in (("jax.scipy", True), ("scipy-jax", True), ("scipy", False)):
         if name in peers:
             R = peers[name]
+            kw = {"assume_valid": True} if name == "scipy-jax" and build == "from_matrix" else {}
             out.append(
                 Contender(
-                    name, "", lambda x, R=R: getattr(getattr(R, build)(x), read)(*args), traceable
+                    name,
+                    "",
+                    lambda x, R=R, kw=kw: getattr(getattr(R, build)(x, **kw), read)(*args),
+                    traceable,
                 )
             )
     return out
@@ -179,9 +207,10 @@ def rotation_class(build: str, read: str, *args):
 
 
 def ordered(*groups):
-    """rotjax first, in the order given, then jax.scipy, jaxlie, scipy (the tables' order)."""
-    rank = {"rotjax": 0, "jax.scipy": 1, "jaxlie": 2, "scipy": 3}
-    return sorted((c for g in groups for c in g), key=lambda c: rank.get(c.impl, 4))
+    """rotjax first, in the order given, then jax.scipy, jaxlie, scipy on JAX, scipy (the
+    tables' order)."""
+    rank = {"rotjax": 0, "jax.scipy": 1, "jaxlie": 2, "scipy-jax": 3, "scipy": 4}
+    return sorted((c for g in groups for c in g), key=lambda c: rank.get(c.impl, 5))
 
 
 def _rpy(r):
@@ -302,7 +331,7 @@ CASES = {
             "matrix",
             lambda p: ordered(
                 [rotjax_fn("matrix_to_euler", "", SEQ)],
-                [c for c in scipy_like(p, "from_matrix", "as_euler", SEQ) if c.impl == "scipy"],
+                [c for c in scipy_like(p, "from_matrix", "as_euler", SEQ) if c.impl != "jax.scipy"],
             ),
             A.matrix_to_euler_errors,
         ),

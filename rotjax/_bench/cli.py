@@ -11,17 +11,26 @@ import time
 from pathlib import Path
 
 DEFAULT_OUT = "bench_out"
-# glibc returns large freed buffers to the system and maps fresh ones, so every call would pay
-# page faults for its output: the measurement runs in a child with these pinned.
+# With glibc's defaults, a buffer over 32 MiB (2^20 float32 matrices: 36 MiB) is mapped fresh and
+# returned to the system on every call, so every call pays page faults for its output; users
+# run so, and the published runs measure so. --pin-malloc keeps such buffers in the heap.
 MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": str(1 << 30), "MALLOC_TRIM_THRESHOLD_": str(1 << 30)}
+# scipy's Rotation computes on JAX arrays (jitted) only with this set before scipy is imported.
+SCIPY_ENV = {"SCIPY_ARRAY_API": "1"}
 
 RUN_HELP = """\
-Measure every operation, method and dtype against the importable peers (scipy Rotation,
-jax.scipy.spatial.transform.Rotation, jaxlie SO3): jitted throughput (medians over interleaved
+Measure every operation, method and dtype against the importable peers (scipy's Rotation on
+NumPy arrays and, jitted, on JAX arrays; jax.scipy.spatial.transform.Rotation; jaxlie SO3):
+jitted throughput (medians over interleaved
 rounds), its fraction of a copy kernel that reads and writes the same bytes, single-call
 latency, compile time, jit(grad) throughput, and the largest and median error in eps against
 mpmath on adversarial sets (near identity, near and at 180 degrees, ties, gimbal lock, noisy
-matrices). Writes bench.json, bench.txt and bench.png into --out.
+matrices). Writes bench.json, bench.txt and the plots (bench-*.png) into --out.
+
+The measurement runs in a child process with SCIPY_ARRAY_API=1 (so that scipy accepts JAX
+arrays) and glibc's default allocator settings, as users run (--pin-malloc: with its mmap and
+trim thresholds at 1 GiB instead, which spares each call the page faults of a fresh output
+buffer). The tables state which allocator a run used.
 
 --quick: a batch of 2^16, three rounds, four operations, few accuracy samples. At that size
 the data stays in cache, so the copy kernel is no bandwidth limit: the %copy column and the
@@ -29,11 +38,12 @@ copy rows are left out (they are reported for batches of 2^20 and more, see --lo
 """
 
 REPORT_HELP = """\
-Regenerate, without measuring, the files made from a bench.json: OUT/bench.png,
-OUT/_generated/bench_table.md (every row), OUT/_generated/headline.md (rotjax against the
-peers), and the README block between <!-- headline:start --> and <!-- headline:end --> when the
-README has those markers. --check exits 1 if any of them is out of date (the markdown is
-compared exactly, the plot by the digest of the data it was drawn from).
+Regenerate, without measuring, the files made from a bench.json: the plots OUT/bench-*.png,
+OUT/_generated/bench_table.md (a table per operation), OUT/_generated/headline.md (rotjax
+against the peers), OUT/_generated/machine.md (the machine paragraph), and the README block
+between <!-- headline:start --> and <!-- headline:end --> when the README has those markers.
+--check exits 1 if any of them is out of date (the markdown is compared exactly, the plots by
+the digest of the data they were drawn from).
 """
 
 
@@ -104,15 +114,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--why", default="", help="with --merge-into: why these rows were measured again"
     )
+    p.add_argument(
+        "--pin-malloc",
+        action="store_true",
+        help="glibc's mmap and trim thresholds at 1 GiB (default: glibc's defaults, as users run)",
+    )
     args = p.parse_args(argv)
     from .cases import CASES
 
     unknown = sorted(set(args.ops.split(",") if args.ops else ()) - set(CASES))
     if unknown:
         p.error(f"unknown operations {unknown}; expected some of {sorted(CASES)}")
-    if any(os.environ.get(k) != v for k, v in MALLOC_ENV.items()):
-        # glibc reads these once, at start-up: run the measurement in a child that has them.
-        env = {**os.environ, **MALLOC_ENV}
+    want = {**SCIPY_ENV, **(MALLOC_ENV if args.pin_malloc else {})}
+    if any(os.environ.get(k) != v for k, v in want.items()):
+        # glibc and scipy read these once, at start-up: measure in a child that has them.
+        env = {**os.environ, **want}
         return subprocess.call([sys.executable, "-m", "rotjax", "bench", *argv], env=env)
     from . import report
     from .runner import log, machine, run
@@ -151,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
         log(f"[bench] merged {sorted({r['op'] for r in rows})} into {path}")
     (out_dir / "bench.txt").write_text(text + "\n")
     print(text)
-    if report.write_plot(meta, rows, out_dir / "bench.png"):
-        log(f"[bench] wrote {out_dir / 'bench.png'}")
+    for path in report.write_plots(meta, rows, out_dir):
+        log(f"[bench] wrote {path}")
     log(f"[bench] wrote {out_dir / 'bench.json'} in {meta['seconds']} s")
     return 0

@@ -27,7 +27,13 @@ COLUMNS = (
     "err_median_eps",
     "err_by_set",
 )
-PEERS = ("jax.scipy", "jaxlie", "scipy")
+PEERS = ("jax.scipy", "jaxlie", "scipy-jax", "scipy")
+PEER_LABELS = {
+    "jax.scipy": "jax.scipy",
+    "jaxlie": "jaxlie",
+    "scipy-jax": "scipy on JAX",
+    "scipy": "scipy on NumPy",
+}
 HEADLINE_OPS = (
     "matrix_to_quaternion",
     "quaternion_to_matrix",
@@ -39,10 +45,20 @@ HEADLINE_OPS = (
 README_START, README_END = "<!-- headline:start -->", "<!-- headline:end -->"
 # Distinct per dtype, so that no two points of one contender share a marker.
 MARKERS = {"float32": "o", "float64": "s", "bfloat16": "^", "float16": "v"}
+# (file key, operation, accuracy set or None for the clean sets, title): one figure each.
 PANELS = (
-    ("matrix_to_quaternion", None, "matrix to quaternion, clean sets"),
-    ("matrix_to_quaternion", "noisy_0.0001", "matrix to quaternion, noise 1e-4 (vs optimal)"),
-    ("quaternion_to_euler", None, "quaternion to Euler, backward error"),
+    ("m2q", "matrix_to_quaternion", None, "matrix to quaternion, clean sets"),
+    ("m2q-noisy", "matrix_to_quaternion", "noisy_0.0001", "matrix to quaternion, noise 1e-4"),
+    ("q2e", "quaternion_to_euler", None, "quaternion to Euler angles, backward error"),
+)
+# The plots are drawn at the width the docs show them (mkdocs-material's content column at a
+# 1280-pixel window), so that their text is read at the size it is drawn.
+PLOT_WIDTH_PX, PLOT_DPI = 690, 100
+SPEED_RATIO = "rotjax speed ÷ {}"
+SPEED_RATIO_NOTE = (
+    "Speed ratios are rotjax's throughput divided by the other's (median of per-round ratios, "
+    "jitted, contenders interleaved): above 1 rotjax is faster, below 1 slower (0.5x: half "
+    "as fast)."
 )
 
 
@@ -95,8 +111,9 @@ def merge(meta, rows, new_meta, new_rows, why=""):
 
 
 def contender(r) -> str:
-    """``impl`` or ``impl:method``: one label per contender."""
-    return r["impl"] + (f":{r['method']}" if r["method"] else "")
+    """``impl`` or ``impl:method``, with scipy named by the arrays it ran on: one label per
+    contender."""
+    return PEER_LABELS.get(r["impl"], r["impl"]) + (f":{r['method']}" if r["method"] else "")
 
 
 def _fmt(v, spec):
@@ -108,13 +125,27 @@ def _pct(r):
     return None if r["vs_copy"] is None else 100 * r["vs_copy"]
 
 
-# (header, width, value, format) of the table columns
+def _inv(v):
+    return 1 / v if v else None
+
+
+def speedup(r):
+    """rotjax's default method's throughput divided by this row's (above 1: rotjax faster)."""
+    return _inv(r["vs_rotjax"])
+
+
+def eager_speedup(r):
+    """scipy's single-call time divided by this row's (above 1: faster than scipy)."""
+    return _inv(r["eager_vs_scipy"])
+
+
+# (header, width, value, format) of the text table printed by a run
 _TABLE = (
     ("Mrot/s", 8, lambda r: r["mrot_s"], ".1f"),
     ("%copy", 7, _pct, ".0f"),
-    ("x rotjax", 9, lambda r: r["vs_rotjax"], ".2f"),
+    ("rotjax/this", 12, speedup, ".2f"),
     ("eager us", 9, lambda r: r["eager_us"], ".1f"),
-    ("x scipy", 8, lambda r: r["eager_vs_scipy"], ".2f"),
+    ("scipy/this", 11, eager_speedup, ".2f"),
     ("compile s", 10, lambda r: r["compile_s"], ".2f"),
     ("grad Mrot/s", 12, lambda r: r["grad_mrot_s"], ".1f"),
     ("grad/fwd", 9, lambda r: r["grad_over_fwd"], ".2f"),
@@ -124,7 +155,8 @@ _TABLE = (
 
 
 def table(rows) -> str:
-    """The fixed-width text table printed by a run."""
+    """The fixed-width text table printed by a run (rotjax/this: rotjax's default method's
+    throughput over this row's; scipy/this: scipy's single-call time over this row's)."""
     head = f"{'operation':<35}{'impl':<11}{'method':<12}{'dtype':<9}"
     head += "".join(f"{h:>{w}}" for h, w, _, _ in _TABLE)
     lines = [head, "-" * len(head)]
@@ -138,18 +170,62 @@ def _machine(m) -> str:
     return f"{m.get('cpu', '?')} ({m.get('cores', '?')} cores)"
 
 
+def allocator(meta) -> str:
+    """Which malloc settings the run measured with (glibc reads them at start-up)."""
+    env = {k: v for k, v in (meta.get("malloc_env") or {}).items() if v is not None}
+    if not env:
+        return "glibc's default malloc settings"
+    if set(env.values()) == {str(1 << 30)}:
+        return "glibc malloc with mmap and trim thresholds pinned at 1 GiB"
+    return "glibc malloc with " + ", ".join(f"{k}={v}" for k, v in sorted(env.items()))
+
+
+def _device(meta) -> str:
+    kind, _, name = (meta.get("device") or "?").partition(": ")
+    return "CPU" if kind == "cpu" else (name or kind)
+
+
+def _batch(meta) -> str:
+    batch = meta.get("batch")
+    return f"2^{batch.bit_length() - 1}" if batch and batch & (batch - 1) == 0 else str(batch)
+
+
+def _run_of(meta, ops):
+    """``(date, machine)`` of the run that measured ``ops`` (a merged later run or the main)."""
+    date, machine = meta.get("date"), meta.get("machine", {})
+    for later in later_runs(meta):
+        if set(ops) & set(later["ops"]):
+            date, machine = later["date"], later.get("machine") or machine
+    return date, machine
+
+
+def caption(meta, ops) -> str:
+    """One line under each generated table: machine, device, dates, batch and allocator of the
+    runs that measured ``ops``."""
+    runs = [_run_of(meta, [op]) for op in ops] or [(meta.get("date"), meta.get("machine", {}))]
+    dates = sorted({d[:10] for d, _ in runs})
+    machines = list(dict.fromkeys(_machine(m) for _, m in runs))
+    when = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
+    quick = ", --quick" if meta.get("quick") else ""
+    return (
+        f"*{' and '.join(machines)}, {_device(meta)}; measured {when}; batch {_batch(meta)}"
+        f"{quick}; {allocator(meta)}.*"
+    )
+
+
 def provenance(meta) -> str:
-    """One line: machine, device, date, versions and batch of a run."""
+    """The machine paragraph: machine, device, date, versions, batch, allocator and run time,
+    and the runs whose rows were merged in."""
     m = meta.get("machine", {})
     versions = meta.get("versions") or {"jax": meta.get("jax")}
     vs = ", ".join(f"{k} {v}" for k, v in versions.items() if v)
-    batch = meta.get("batch")
-    size = f"2^{batch.bit_length() - 1}" if batch and batch & (batch - 1) == 0 else str(batch)
+    secs = meta.get("seconds")
+    took = f"; the run took {secs / 60:.0f} min" if secs else ""
     line = (
-        f"Machine: {_machine(m)}, device {meta.get('device')}"
-        f"; date {meta.get('date')}; {vs}; batch {size}"
+        f"Machine: {_machine(m)}, {m.get('platform', '')}; device {meta.get('device')}; "
+        f"date {meta.get('date')}{took}; {vs}; batch {_batch(meta)}"
         + ("; --quick" if meta.get("quick") else "")
-        + "."
+        + f"; {allocator(meta)}."
     )
     for later in later_runs(meta):
         on = f" on {_machine(later['machine'])}" if later.get("machine") else ""
@@ -157,15 +233,56 @@ def provenance(meta) -> str:
     return line
 
 
-def markdown_table(meta, rows) -> str:
-    """Every row, as a markdown table, under the provenance line."""
-    head = ["operation", "contender", "dtype"] + [h for h, _, _, _ in _TABLE]
-    out = [provenance(meta), "", "| " + " | ".join(head) + " |"]
-    out.append("|" + "|".join([":--"] * 3 + ["--:"] * len(_TABLE)) + "|")
+def _md_table(head, align, lines) -> list[str]:
+    return [
+        "| " + " | ".join(head) + " |",
+        "|" + "|".join(":--" if a == "l" else "--:" for a in align) + "|",
+        *("| " + " | ".join(cells) + " |" for cells in lines),
+    ]
+
+
+# (header, value, format) of the per-operation tables: the main one, and the one in the fold
+_MAIN = (
+    ("Mrot/s", lambda r: r["mrot_s"], ".1f"),
+    (SPEED_RATIO.format("this"), speedup, ".2f"),
+    ("% of copy", _pct, ".0f"),
+    ("grad ÷ forward speed", lambda r: r["grad_over_fwd"], ".2f"),
+    ("max eps", lambda r: r["err_max_eps"], ".3g"),
+)
+_MORE = (
+    ("eager µs", lambda r: r["eager_us"], ".1f"),
+    ("scipy time ÷ this (eager)", eager_speedup, ".2f"),
+    ("compile s", lambda r: r["compile_s"], ".2f"),
+    ("grad Mrot/s", lambda r: r["grad_mrot_s"], ".1f"),
+    ("median eps", lambda r: r["err_median_eps"], ".3g"),
+)
+
+
+def _by_op(rows):
+    ops = {}
     for r in rows:
-        cells = [_fmt(get(r), spec) for _, _, get, spec in _TABLE]
-        out.append("| " + " | ".join([r["op"], contender(r), r["dtype"], *cells]) + " |")
-    return "\n".join(out) + "\n"
+        ops.setdefault(r["op"], []).append(r)
+    return ops
+
+
+def markdown_table(meta, rows) -> str:
+    """One section per operation: a table of the main columns, its caption, and the other
+    columns in a fold (at most 7 columns each, to fit the docs' content width)."""
+    out = []
+    for op, rs in _by_op(rows).items():
+        out += [f"### {op}", "", caption(meta, [op]), ""]
+        for cols, indent in ((_MAIN, ""), (_MORE, "    ")):
+            head = ["contender", "dtype", *(h for h, _, _ in cols)]
+            lines = [
+                [contender(r), r["dtype"], *(_fmt(get(r), spec) for _, get, spec in cols)]
+                for r in rs
+                if cols is _MAIN or r["impl"] != "copy"
+            ]
+            if indent:
+                out += ['??? note "Single-call latency, compile time, gradient, median error"', ""]
+            out += [indent + line for line in _md_table(head, "ll" + "r" * len(cols), lines)]
+            out.append("")
+    return "\n".join(out)
 
 
 def _num(v):
@@ -174,39 +291,52 @@ def _num(v):
 
 
 def _eps(r):
-    """The largest error; "NaN" where some output was not finite (written as null)."""
+    """The largest error in eps; "NaN" where some output was not finite (written as null)."""
     if r["err_max_eps"] is not None:
-        return f"{r['err_max_eps']:.2g} eps"
-    return "NaN output" if r["err_by_set"] else "-"
+        return f"{r['err_max_eps']:.2g}"
+    return "NaN" if r["err_by_set"] else "-"
 
 
-def headline(meta, rows, dtype="float64") -> str:
-    """rotjax's default method against each peer, one line per conversion, in ``dtype``."""
+def headline(meta, rows) -> str:
+    """rotjax's default method against each peer, per conversion and dtype: a speed table and
+    an accuracy table, each with its caption."""
     by = {}
     for r in rows:
-        if r["dtype"] == dtype and r["impl"] != "copy":
-            by.setdefault((r["op"], r["impl"]), r)  # rotjax's first row: its default method
+        if r["dtype"] in ("float32", "float64") and r["impl"] != "copy":
+            by.setdefault((r["op"], r["dtype"], r["impl"]), r)  # rotjax's default method first
+    peers = [p for p in PEERS if any(k[2] == p for k in by)]
+    keys = [(op, dt) for op in HEADLINE_OPS for dt in ("float32", "float64")]
+    keys = [k for k in keys if (*k, "rotjax") in by]
+    speed, acc = [], []
+    for op, dt in keys:
+        own = by[(op, dt, "rotjax")]
+        others = [by.get((op, dt, p)) for p in peers]
+        speed.append(
+            [op, dt, _num(own["mrot_s"])]
+            + [f"{_num(speedup(r))}x" if r and speedup(r) else "-" for r in others]
+        )
+        acc.append([op, dt, _eps(own)] + [_eps(r) if r else "-" for r in others])
+    align = "ll" + "r" * (1 + len(peers))
+    labels = [PEER_LABELS.get(p, p) for p in peers]
     out = [
-        f"Throughput of rotjax ({dtype}, batch of {meta.get('batch')}, jitted) and how many "
-        "times faster it is than each peer; largest error over the adversarial sets, in eps.",
+        "Speed: rotjax's throughput in millions of rotations per second, and the speed ratio "
+        "to each peer. " + SPEED_RATIO_NOTE,
         "",
-        "| conversion | rotjax | " + " | ".join(PEERS) + " |",
-        "|:--|--:|" + "--:|" * len(PEERS),
+        *_md_table(
+            ["conversion", "dtype", "rotjax Mrot/s", *(SPEED_RATIO.format(p) for p in labels)],
+            align,
+            speed,
+        ),
+        "",
+        caption(meta, sorted({op for op, _ in keys}, key=HEADLINE_OPS.index)),
+        "",
+        "Accuracy: the largest error over the adversarial sets, in eps of the dtype (lower is "
+        "better; NaN: some output was NaN).",
+        "",
+        *_md_table(["conversion", "dtype", "rotjax", *labels], align, acc),
+        "",
     ]
-    for op in HEADLINE_OPS:
-        own = by.get((op, "rotjax"))
-        if own is None:
-            continue
-        cells = [f"{_num(own['mrot_s'])} Mrot/s, {_eps(own)}"]
-        for p in PEERS:
-            r = by.get((op, p))
-            if r is None or not r["vs_rotjax"]:
-                cells.append("-")
-            else:
-                cells.append(f"{_num(1 / r['vs_rotjax'])}x, {_eps(r)}")
-        out.append(f"| {op} | " + " | ".join(cells) + " |")
-    out += ["", provenance(meta)]
-    return "\n".join(out) + "\n"
+    return "\n".join(out)
 
 
 def digest(meta, rows) -> str:
@@ -217,11 +347,33 @@ def digest(meta, rows) -> str:
     return h.hexdigest()[:16]
 
 
-def figure(meta, rows):
-    """Throughput against largest error, one panel per entry of ``PANELS``.
+def panels(rows):
+    """The entries of ``PANELS`` that ``rows`` have points for."""
+    return [p for p in PANELS if any(r["op"] == p[1] and r["err_by_set"] for r in rows)]
 
-    Colour: the contender; marker: the dtype; the two legends name each once, so no label is
-    drawn on the points.
+
+def _log_axis(axis):
+    """A log scale labelled with plain numbers (0.2, 1, 50): at 1, 2 and 5 times the powers of
+    ten where the data span less than two decades, at the powers of ten otherwise."""
+    import math
+
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    axis.axes.set_xscale("log") if axis is axis.axes.xaxis else axis.axes.set_yscale("log")
+    axis.axes.autoscale_view()
+    lo, hi = sorted(axis.get_view_interval())
+    few = math.log10(hi / lo) < 2
+    axis.set_major_locator(LogLocator(10, subs=(1, 2, 5) if few else (1,)))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def figure(meta, rows, panel):
+    """Throughput against largest error for one entry of ``PANELS``, drawn at the width the
+    docs show it (``PLOT_WIDTH_PX``).
+
+    Colour: the contender; marker: the dtype; the two legends, beside the axes, name each
+    once, so no label is drawn on the points.
     """
     import matplotlib
 
@@ -229,72 +381,87 @@ def figure(meta, rows):
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    names = sorted({contender(r) for r in rows if r["impl"] != "copy"})
+    _, op, set_name, title = panel
+    names = sorted({contender(r) for r in rows if r["op"] == op and r["impl"] != "copy"})
     cmap = plt.get_cmap("tab10" if len(names) <= 10 else "tab20")
     colour = {name: cmap(i % cmap.N) for i, name in enumerate(names)}
-    fig, axes = plt.subplots(1, len(PANELS), figsize=(5.2 * len(PANELS), 4.8), squeeze=False)
+    width = PLOT_WIDTH_PX / PLOT_DPI
+    fig = plt.figure(figsize=(width, 0.62 * width), dpi=PLOT_DPI)
+    ax = fig.add_axes((0.11, 0.14, 0.55, 0.72))
     used = set()
-    for ax, (op, set_name, title) in zip(axes[0], PANELS, strict=True):
-        for r in rows:
-            if r["op"] != op or r["impl"] == "copy" or not r["err_by_set"]:
-                continue
-            err = (
-                r["err_max_eps"]
-                if set_name is None
-                else (r["err_by_set"].get(set_name) or {}).get("max")
-            )
-            if err is None or r["mrot_s"] is None:
-                continue
-            name = contender(r)
-            used.add((name, r["dtype"]))
-            ax.scatter(
-                r["mrot_s"],
-                max(err, 1e-2),  # an exact result (0 eps) drawn at the bottom of the log scale
-                marker=MARKERS[r["dtype"]],
-                color=colour[name],
-                s=42,
-                edgecolors="black",
-                linewidths=0.4,
-            )
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("throughput (million rotations/s, higher is better)")
-        ax.set_ylabel("largest error (eps of the dtype, lower is better)")
-        ax.set_title(title, fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
+    for r in rows:
+        if r["op"] != op or r["impl"] == "copy" or not r["err_by_set"]:
+            continue
+        err = (
+            r["err_max_eps"]
+            if set_name is None
+            else (r["err_by_set"].get(set_name) or {}).get("max")
+        )
+        if err is None or r["mrot_s"] is None:
+            continue
+        name = contender(r)
+        used.add((name, r["dtype"]))
+        ax.scatter(
+            r["mrot_s"],
+            max(err, 1e-2),  # an exact result (0 eps) drawn at the bottom of the log scale
+            marker=MARKERS[r["dtype"]],
+            color=colour[name],
+            s=48,
+            edgecolors="black",
+            linewidths=0.5,
+        )
+    for axis in (ax.xaxis, ax.yaxis):
+        _log_axis(axis)
+    ax.set_xlabel("throughput (million rotations/s, higher is better)", fontsize=9)
+    ax.set_ylabel("largest error (eps, lower is better)", fontsize=9)
+    ax.tick_params(which="both", labelsize=9)
+    ax.set_title(title, fontsize=11)
+    ax.grid(True, which="both", alpha=0.3)
     shown = sorted({n for n, _ in used})
     dtypes = [d for d in MARKERS if any(d == dt for _, dt in used)]
-    by_colour = [Line2D([], [], ls="", marker="o", color=colour[n], label=n) for n in shown]
+    by_colour = [
+        Line2D([], [], ls="", marker="o", ms=7, color=colour[n], mec="black", mew=0.5, label=n)
+        for n in shown
+    ]
     by_marker = [
-        Line2D([], [], ls="", marker=MARKERS[d], color="white", mec="black", label=d)
+        Line2D([], [], ls="", marker=MARKERS[d], ms=7, color="white", mec="black", label=d)
         for d in dtypes
     ]
-    kw = {"loc": "lower center", "fontsize": 8, "title_fontsize": 8, "frameon": False}
-    fig.legend(handles=by_colour, title="contender (colour)", ncol=4, bbox_to_anchor=(0.4, 0), **kw)
-    fig.legend(handles=by_marker, title="dtype (marker)", ncol=4, bbox_to_anchor=(0.8, 0), **kw)
-    m = meta.get("machine", {})
-    title = (
-        f"rotjax benchmark on {m.get('cpu', '?')} ({meta.get('device')}), {meta.get('date')}, "
-        f"jax {meta.get('jax')}, batch {meta.get('batch')}"
+    kw = {"loc": "upper left", "fontsize": 9, "title_fontsize": 9, "frameon": False}
+    fig.legend(handles=by_colour, title="contender (colour)", bbox_to_anchor=(0.68, 0.87), **kw)
+    y = 0.87 - 0.058 * (len(shown) + 1.6)
+    fig.legend(handles=by_marker, title="dtype (marker)", bbox_to_anchor=(0.68, y), **kw)
+    date, m = _run_of(meta, [op])
+    fig.suptitle(
+        f"{_machine(m)}, {_device(meta)}, {date[:10]}, batch {_batch(meta)}",
+        fontsize=9,
+        x=0.02,
+        ha="left",
+        y=0.985,
+        color="0.3",
     )
-    for later in later_runs(meta):
-        if later.get("machine"):
-            title += f"\n{', '.join(later['ops'])}: {later['date']} on {_machine(later['machine'])}"
-    fig.suptitle(title, fontsize=11)
-    fig.tight_layout(rect=(0, 0.13, 1, 1))
     return fig
 
 
-def write_plot(meta, rows, path: Path) -> bool:
-    """The figure as a PNG carrying the digest of its data; False without matplotlib."""
+def plot_path(out_dir, panel, suffix="") -> Path:
+    return Path(out_dir) / f"bench-{panel[0]}{suffix}.png"
+
+
+def write_plots(meta, rows, out_dir, suffix="") -> list[Path]:
+    """One PNG per panel (see :func:`panels`), each carrying the digest of its data; none
+    without matplotlib."""
     try:
         import matplotlib.pyplot as plt
     except ImportError:
-        return False
-    fig = figure(meta, rows)
-    fig.savefig(path, dpi=110, metadata={"Software": None, "Source": digest(meta, rows)})
-    plt.close(fig)
-    return True
+        return []
+    paths = []
+    for panel in panels(rows):
+        fig = figure(meta, rows, panel)
+        path = plot_path(out_dir, panel, suffix)
+        fig.savefig(path, dpi=PLOT_DPI, metadata={"Software": None, "Source": digest(meta, rows)})
+        plt.close(fig)
+        paths.append(path)
+    return paths
 
 
 def plot_digest(path: Path):
@@ -316,10 +483,11 @@ def readme_block(text: str, block: str):
 def generate(json_path, out_dir, readme=None, suffix="", check=False) -> list[str]:
     """Write (or, with ``check``, compare) the files generated from ``json_path``.
 
-    Writes ``out_dir/bench{suffix}.png``, ``out_dir/_generated/bench_table{suffix}.md``,
-    ``out_dir/_generated/headline{suffix}.md``, and the README block between
-    ``README_START`` and ``README_END`` when ``readme`` has them. Returns the paths that are
-    (with ``check``: would be) changed.
+    Writes ``out_dir/bench-<panel>{suffix}.png`` (one per panel),
+    ``out_dir/_generated/bench_table{suffix}.md`` (one table per operation),
+    ``out_dir/_generated/headline{suffix}.md``, ``out_dir/_generated/machine{suffix}.md`` (the
+    machine paragraph), and the README block between ``README_START`` and ``README_END`` when
+    ``readme`` has them. Returns the paths that are (with ``check``: would be) changed.
     """
     meta, rows = load(json_path)
     out_dir = Path(out_dir)
@@ -328,16 +496,16 @@ def generate(json_path, out_dir, readme=None, suffix="", check=False) -> list[st
     texts = {
         gen / f"bench_table{suffix}.md": markdown_table(meta, rows),
         gen / f"headline{suffix}.md": head,
+        gen / f"machine{suffix}.md": provenance(meta) + "\n",
     }
     if readme is not None and Path(readme).exists():
         new = readme_block(Path(readme).read_text(), head)
         if new is not None:
             texts[Path(readme)] = new
     stale = [str(p) for p, t in texts.items() if not p.exists() or p.read_text() != t]
-    png = out_dir / f"bench{suffix}.png"
-    png_stale = not png.exists() or plot_digest(png) != digest(meta, rows)
-    if png_stale:
-        stale.append(str(png))
+    pngs = [plot_path(out_dir, p, suffix) for p in panels(rows)]
+    png_stale = [p for p in pngs if not p.exists() or plot_digest(p) != digest(meta, rows)]
+    stale += [str(p) for p in png_stale]
     if check:
         return stale
     gen.mkdir(parents=True, exist_ok=True)
@@ -345,5 +513,5 @@ def generate(json_path, out_dir, readme=None, suffix="", check=False) -> list[st
         if str(p) in stale:
             p.write_text(t)
     if png_stale:
-        write_plot(meta, rows, png)
+        write_plots(meta, rows, out_dir, suffix)
     return stale

@@ -136,12 +136,15 @@ def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
                 if (
                     case.eager
                     and dt in ("float32", "float64")
-                    and not (quick and impl in ("jax.scipy", "jaxlie"))
+                    and not (quick and impl in ("jax.scipy", "jaxlie", "scipy-jax"))
                 ):
                     # One rotation, unbatched (jaxlie's adapters vmap, so they get a batch of 1).
-                    # rotjax's public functions jit-wrap themselves; jax.scipy runs op by op.
+                    # rotjax's public functions jit-wrap themselves; jax.scipy and scipy on a
+                    # JAX array run op by op.
                     x1_np = jax.tree.map(lambda v, t=np_dt: np.array(v, t), x1)
                     x1_in = jax.tree.map(lambda v: v[None], x1_np) if impl == "jaxlie" else x1_np
+                    if impl == "scipy-jax":
+                        x1_in = jax.tree.map(jnp.asarray, x1_np)
                     T.timed(fn, x1_in)  # the first call compiles: not part of the latency
                     row["eager_us"], row["eager_vs_scipy"] = T.eager(
                         fn, x1_in, scipy_eager, x1_np, eager_reps
