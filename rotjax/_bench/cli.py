@@ -115,6 +115,16 @@ def main(argv: list[str] | None = None) -> int:
         "--why", default="", help="with --merge-into: why these rows were measured again"
     )
     p.add_argument(
+        "--rounds", type=int, default=None, help="interleaved timing rounds (default 21; 3 quick)"
+    )
+    p.add_argument(
+        "--accuracy-samples",
+        type=int,
+        default=None,
+        help="inputs per accuracy set (default 96; 8 quick); the edge cases of the gimbal-lock "
+        "sets are kept whatever the number",
+    )
+    p.add_argument(
         "--pin-malloc",
         action="store_true",
         help="glibc's mmap and trim thresholds at 1 GiB (default: glibc's defaults, as users run)",
@@ -131,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         env = {**os.environ, **want}
         return subprocess.call([sys.executable, "-m", "rotjax", "bench", *argv], env=env)
     from . import report
-    from .runner import log, machine, run
+    from .runner import log, machine, run, settings
 
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -139,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.perf_counter()
     ops = args.ops.split(",") if args.ops else None
-    rows = run(args.quick, ops, args.log2_batch)
+    rows = run(args.quick, ops, args.log2_batch, args.rounds, args.accuracy_samples)
     versions = _versions()
     meta = {
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -151,6 +161,7 @@ def main(argv: list[str] | None = None) -> int:
         "batch": 1
         << (args.log2_batch if args.log2_batch is not None else (16 if args.quick else 20)),
         "malloc_env": {k: os.environ.get(k) for k in MALLOC_ENV},
+        **settings(args.quick, args.rounds, args.accuracy_samples),
         "seconds": round(time.perf_counter() - t0, 1),
         "columns": list(report.COLUMNS),
     }

@@ -21,9 +21,19 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
+def settings(quick: bool, rounds=None, accuracy_samples=None) -> dict:
+    """Rounds of the timing groups and accuracy samples per set (the defaults of a full or a
+    quick run where not given)."""
+    return {
+        "rounds": rounds or (3 if quick else 21),  # medians of per-round ratios: outvote bursts
+        "accuracy_samples": accuracy_samples or (8 if quick else 96),
+    }
+
+
+def run(quick: bool, ops=None, log2_batch=None, rounds=None, accuracy_samples=None) -> list[dict]:
     """The rows of the benchmark (see ``report.COLUMNS``) for ``ops`` (default: every case,
-    or the quick ones), on a batch of ``2**log2_batch`` rotations."""
+    or the quick ones), on a batch of ``2**log2_batch`` rotations, in ``rounds`` interleaved
+    rounds, with ``accuracy_samples`` inputs per accuracy set (see :func:`settings`)."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -33,8 +43,8 @@ def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
     found = C.peers()
     n = 1 << (log2_batch if log2_batch is not None else (16 if quick else 20))
     with_copy = n >= T.MIN_COPY_BATCH
-    rounds = 3 if quick else 21  # medians of per-round ratios: enough rounds to outvote bursts
-    n_acc = 8 if quick else 96
+    conf = settings(quick, rounds, accuracy_samples)
+    rounds, n_acc = conf["rounds"], conf["accuracy_samples"]
     per_seq = 4 if quick else 8
     # Accuracy of Euler extraction: all 24 sequences; --quick: one of each kind.
     seqs = ["xyz", "ZXZ"] if quick else SEQS
@@ -146,8 +156,11 @@ def run(quick: bool, ops=None, log2_batch=None) -> list[dict]:
                     if impl == "scipy-jax":
                         x1_in = jax.tree.map(jnp.asarray, x1_np)
                     T.timed(fn, x1_in)  # the first call compiles: not part of the latency
+                    # The peers that run op by op on JAX arrays take milliseconds a call: a
+                    # tenth of the repetitions give a steady median.
+                    reps = eager_reps // 10 if impl in ("jax.scipy", "scipy-jax") else eager_reps
                     row["eager_us"], row["eager_vs_scipy"] = T.eager(
-                        fn, x1_in, scipy_eager, x1_np, eager_reps
+                        fn, x1_in, scipy_eager, x1_np, max(reps, 3)
                     )
                 try:
                     # jaxlie's executable takes its own layout: it is jitted apart.
