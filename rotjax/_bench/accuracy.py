@@ -457,7 +457,7 @@ def euler_call(fn, impl, x, seq, jnp_dtype):
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # scipy warns at gimbal lock
-            r = Rotation.from_quat(x) if quat else Rotation.from_matrix(x)
+            r = Rotation.from_quat(x) if quat else Rotation.from_matrix(x, assume_valid=True)
             return r.as_euler(seq)
     # jaxlie: its one sequence, jitted (as timed; one compilation rather than one per op)
     return np.asarray(jax.jit(fn)(jnp.asarray(x, dtype=jnp_dtype)), np.float64)

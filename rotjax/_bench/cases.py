@@ -154,15 +154,15 @@ def scipy_like(peers, build: str, read: str, *args):
     """jax.scipy, scipy on JAX arrays and scipy on NumPy arrays as
     ``Rotation.<build>(x).<read>(*args)``.
 
-    scipy on JAX arrays builds from a matrix with ``assume_valid=True``: under ``jit`` its
-    default projects every matrix by an SVD (an eager call does so only where the matrix is not
-    orthogonal), which rotjax's conversions do not do either.
+    scipy builds from a matrix with ``assume_valid=True``, as rotjax's conversions do not
+    project either: its default projects by an SVD every matrix under ``jit``, and on NumPy
+    arrays every matrix that is not orthogonal to within 1e-12 (every float32 matrix).
     """
     out = []
     for name, traceable in (("jax.scipy", True), ("scipy-jax", True), ("scipy", False)):
         if name in peers:
             R = peers[name]
-            kw = {"assume_valid": True} if name == "scipy-jax" and build == "from_matrix" else {}
+            kw = {"assume_valid": True} if name != "jax.scipy" and build == "from_matrix" else {}
             out.append(
                 Contender(
                     name,
