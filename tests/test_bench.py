@@ -200,6 +200,7 @@ def test_quick_benchmark_writes_json(tmp_path):
     # glibc's default malloc settings unless the caller's environment sets them (--pin-malloc)
     assert meta["malloc_env"] == {k: os.environ.get(k) for k in cli.MALLOC_ENV}
     assert meta["versions"]["jax"] == jax.__version__
+    assert meta["rounds"] == 3 and meta["accuracy_samples"] == 8 and "commit" in meta
     assert rows and all(set(r) == set(R.COLUMNS) for r in rows)
     m2q = [r for r in rows if r["op"] == "matrix_to_quaternion" and r["dtype"] == "float32"]
     assert {r["method"] for r in m2q if r["impl"] == "rotjax"} == {"shepperd", "markley", "optimal"}

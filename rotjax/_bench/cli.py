@@ -84,6 +84,23 @@ def _versions():
     return out
 
 
+def _commit():
+    """The git commit of the measured rotjax ("+changes" where its files differ from it), or
+    None outside a git checkout."""
+    root = Path(__file__).resolve().parents[2]
+
+    def git(*args):
+        return subprocess.run(
+            ["git", "-C", str(root), *args], capture_output=True, text=True, check=True
+        ).stdout.strip()
+
+    try:
+        changed = git("status", "--porcelain", "--", "rotjax")
+        return git("rev-parse", "--short=12", "HEAD") + ("+changes" if changed else "")
+    except (OSError, subprocess.CalledProcessError):
+        return None
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[2:] if argv is None else argv)
     if argv and argv[0] == "report":
@@ -157,6 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}",
         "jax": jax.__version__,
         "versions": versions,
+        "commit": _commit(),
         "quick": args.quick,
         "batch": 1
         << (args.log2_batch if args.log2_batch is not None else (16 if args.quick else 20)),

@@ -232,7 +232,9 @@ def provenance(meta) -> str:
     took = f"; the run took {secs / 60:.0f} min" if secs else ""
     line = (
         f"Machine: {_machine(m)}, {m.get('platform', '')}; device {meta.get('device')}; "
-        f"date {meta.get('date')}{took}; {vs}; batch {_batch(meta)}"
+        f"date {meta.get('date')}{took}; {vs}"
+        + (f" (commit {meta['commit']})" if meta.get("commit") else "")
+        + f"; batch {_batch(meta)}"
         + ("; --quick" if meta.get("quick") else "")
         + (f"; {meta['rounds']} interleaved rounds" if meta.get("rounds") else "")
         + (
