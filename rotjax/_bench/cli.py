@@ -101,6 +101,20 @@ def _commit():
         return None
 
 
+def _json_rows(rows):
+    """Strict JSON: an infinite error (a NaN result) is written as null."""
+    from . import report
+
+    out = []
+    for r in rows:
+        r = dict(r)
+        for k in ("err_max_eps", "err_median_eps"):
+            if r[k] is not None:
+                r[k] = report.finite_or_none(r[k])
+        out.append(r)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[2:] if argv is None else argv)
     if argv and argv[0] == "report":
@@ -166,29 +180,33 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.perf_counter()
     ops = args.ops.split(",") if args.ops else None
-    rows = run(args.quick, ops, args.log2_batch, args.rounds, args.accuracy_samples)
-    versions = _versions()
-    meta = {
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "machine": machine(),
-        "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}",
-        "jax": jax.__version__,
-        "versions": versions,
-        "commit": _commit(),
-        "quick": args.quick,
-        "batch": 1
-        << (args.log2_batch if args.log2_batch is not None else (16 if args.quick else 20)),
-        "malloc_env": {k: os.environ.get(k) for k in MALLOC_ENV},
-        **settings(args.quick, args.rounds, args.accuracy_samples),
-        "seconds": round(time.perf_counter() - t0, 1),
-        "columns": list(report.COLUMNS),
-    }
+
+    def make_meta():
+        return {
+            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            "machine": machine(),
+            "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}",
+            "jax": jax.__version__,
+            "versions": _versions(),
+            "commit": _commit(),
+            "quick": args.quick,
+            "batch": 1
+            << (args.log2_batch if args.log2_batch is not None else (16 if args.quick else 20)),
+            "malloc_env": {k: os.environ.get(k) for k in MALLOC_ENV},
+            **settings(args.quick, args.rounds, args.accuracy_samples),
+            "seconds": round(time.perf_counter() - t0, 1),
+            "columns": list(report.COLUMNS),
+        }
+
+    def partial(rows):  # the operations measured so far, should the run be cut short
+        (out_dir / "bench.partial.json").write_text(report.dumps(make_meta(), _json_rows(rows)))
+
+    rows = run(args.quick, ops, args.log2_batch, args.rounds, args.accuracy_samples, partial)
+    meta = make_meta()
     text = report.table(rows)  # before the JSON conversion: an infinite error prints as inf
-    for r in rows:  # strict JSON: an infinite error (a NaN result) is written as null
-        for k in ("err_max_eps", "err_median_eps"):
-            if r[k] is not None:
-                r[k] = report.finite_or_none(r[k])
+    rows = _json_rows(rows)
     (out_dir / "bench.json").write_text(report.dumps(meta, rows))
+    (out_dir / "bench.partial.json").unlink(missing_ok=True)
     if args.merge_into:
         path = Path(args.merge_into)
         merged = report.merge(*report.load(path), meta, rows, args.why)

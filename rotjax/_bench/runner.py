@@ -30,10 +30,13 @@ def settings(quick: bool, rounds=None, accuracy_samples=None) -> dict:
     }
 
 
-def run(quick: bool, ops=None, log2_batch=None, rounds=None, accuracy_samples=None) -> list[dict]:
+def run(
+    quick: bool, ops=None, log2_batch=None, rounds=None, accuracy_samples=None, done=None
+) -> list[dict]:
     """The rows of the benchmark (see ``report.COLUMNS``) for ``ops`` (default: every case,
     or the quick ones), on a batch of ``2**log2_batch`` rotations, in ``rounds`` interleaved
-    rounds, with ``accuracy_samples`` inputs per accuracy set (see :func:`settings`)."""
+    rounds, with ``accuracy_samples`` inputs per accuracy set (see :func:`settings`).
+    ``done(rows)``, if given, is called with the rows so far after each operation."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -141,26 +144,23 @@ def run(quick: bool, ops=None, log2_batch=None, rounds=None, accuracy_samples=No
                     tg = times[("grad",) + key]
                     row["grad_mrot_s"] = n / T.median_time(tg) / 1e6
                     row["grad_over_fwd"] = T.median_ratio(t, tg)
-                # --quick times single calls of rotjax and scipy only: the JAX peers' first
-                # eager call compiles op by op (seconds), and the targets compare with scipy.
+                # Single calls of rotjax, jaxlie and scipy on NumPy (--quick: rotjax and scipy):
+                # jax.scipy and scipy on JAX arrays run op by op, so that their first eager
+                # call compiles dozens of programs and each later one takes milliseconds (on a
+                # loaded 2-core machine, half of a group's time); the targets compare with scipy.
                 if (
                     case.eager
                     and dt in ("float32", "float64")
-                    and not (quick and impl in ("jax.scipy", "jaxlie", "scipy-jax"))
+                    and impl not in ("jax.scipy", "scipy-jax")
+                    and not (quick and impl == "jaxlie")
                 ):
                     # One rotation, unbatched (jaxlie's adapters vmap, so they get a batch of 1).
-                    # rotjax's public functions jit-wrap themselves; jax.scipy and scipy on a
-                    # JAX array run op by op.
+                    # rotjax's public functions jit-wrap themselves.
                     x1_np = jax.tree.map(lambda v, t=np_dt: np.array(v, t), x1)
                     x1_in = jax.tree.map(lambda v: v[None], x1_np) if impl == "jaxlie" else x1_np
-                    if impl == "scipy-jax":
-                        x1_in = jax.tree.map(jnp.asarray, x1_np)
                     T.timed(fn, x1_in)  # the first call compiles: not part of the latency
-                    # The peers that run op by op on JAX arrays take milliseconds a call: a
-                    # tenth of the repetitions give a steady median.
-                    reps = eager_reps // 10 if impl in ("jax.scipy", "scipy-jax") else eager_reps
                     row["eager_us"], row["eager_vs_scipy"] = T.eager(
-                        fn, x1_in, scipy_eager, x1_np, max(reps, 3)
+                        fn, x1_in, scipy_eager, x1_np, eager_reps
                     )
                 try:
                     # jaxlie's executable takes its own layout: it is jitted apart.
@@ -194,6 +194,8 @@ def run(quick: bool, ops=None, log2_batch=None, rounds=None, accuracy_samples=No
             copy_row["vs_copy"] = 1.0
             copy_row["vs_rotjax"] = T.median_ratio(times[ref_key], times[copy_key])
             rows.append(copy_row)
+        if done is not None:
+            done(rows)
     return rows
 
 
