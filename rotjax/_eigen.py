@@ -30,6 +30,8 @@ import jax
 import jax.numpy as jnp
 
 from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div, select
+from ._quaternion import _multiply, _to_matrix
+from ._shepperd import k4_columns, select_column, stack_last
 
 # One-sided Jacobi converges quadratically (Hestenes 1958; Demmel & Veselic 1992). The sweep
 # counts are the fewest that orthogonalise the columns to the rounding level for every matrix
@@ -187,8 +189,6 @@ def _polar(B, nan_at_zero=True):
     are the largest, and ``Q = u_a v_a^T + u_b v_b^T + (u_a x u_b)(v_a x v_b)^T`` from them,
     ``u = w / |w|``: a rotation, whatever the sign of ``det B``.
     """
-    from ._matrix import _k4_columns, _select_column, _stack_last  # they import this module
-
     Bs = pow2_scale(B, (-2, -1))
     eye = jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), Bs.shape)
     S = jnp.concatenate([Bs, eye], axis=-2)
@@ -209,22 +209,19 @@ def _polar(B, nan_at_zero=True):
     ua = _unit_or(wa, None if nan_at_zero else va)
     ub = _unit_or(wb, _perpendicular(ua))  # rank 1: any rotation taking v_a to u_a
     uc, vc = _cross3(ua, ub), _cross3(va, vb)
-    Q = jnp.stack(
-        [
-            jnp.stack([ua[i] * va[j] + ub[i] * vb[j] + uc[i] * vc[j] for j in range(3)], -1)
-            for i in range(3)
-        ],
-        -2,
-    )
+    q_entries = [
+        [ua[i] * va[j] + ub[i] * vb[j] + uc[i] * vc[j] for j in range(3)] for i in range(3)
+    ]
+    Q = jnp.stack([jnp.stack(row, -1) for row in q_entries], -2)
     # Shepperd's extraction, as in matrix_to_quaternion: the column of K = 4 q q^T with the
     # largest diagonal (at least 1 for a rotation, so |c|^2 >= 4 is in rsqrt's domain),
     # normalised to w >= 0; rsqrt (multiplications only) and the nested selection fuse into
     # the one loop that writes q. Within rounding of 180 degrees (|w| <= 4 eps) the selected
     # component is positive instead, so that rounding of the input cannot flip the result.
-    c, n = _select_column(*_k4_columns(Q))
+    c, n = select_column(*k4_columns([x for row in q_entries for x in row]))
     flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
     inv = rsqrt(n)
-    q = _stack_last(c, jnp.where(flip, -inv, inv))
+    q = stack_last(c, jnp.where(flip, -inv, inv))
     s = jnp.stack([_dot3(ua, wa), _dot3(ub, wb), _dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)
 
@@ -308,8 +305,6 @@ def _top_matrix(B, q, aux, Q):
 
 @_top_matrix.defjvp
 def _top_matrix_jvp(primals, tangents):
-    from ._quaternion import _to_matrix  # its package imports this module
-
     (B, q, aux, _), (dB, _, _, _) = primals, tangents
     return jax.jvp(lambda b: _to_matrix(_top(b, q, aux)), (B,), (dB,))
 
@@ -353,8 +348,6 @@ def _top_jvp(primals, tangents):
     # expression is an exact identity in B, so its derivative is the second derivative of v. A
     # gap below TIE_ULPS eps |K| is a tie: Y is 0 along it. B is scaled by the kernel's exact
     # power of two (v does not depend on the scale).
-    from ._quaternion import _multiply, _to_matrix  # its package imports this module
-
     (B, qe, aux), (dB, _, _) = primals, tangents
     V, s = aux
     Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor

@@ -40,9 +40,11 @@ from ._numerics import (
     like_rank,
     matmul,
     matvec,
+    max_abs,
     public,
     select,
     to_scalar_last,
+    unit_scale,
     vee,
 )
 from ._quaternion import _conjugate, _multiply, _normalize, _prescaled, _renormalize
@@ -340,10 +342,15 @@ def quaternion_derivative_to_angular_velocity(
     _check_frame(frame)
     q = to_scalar_last(q, scalar_first)
     qd = to_scalar_last(qd, scalar_first)
+    # omega is homogeneous of degree 0 in (q, q_dot): both scaled by the power of two that
+    # brings q's largest component into [0.5, 2) (exact; 1 for a unit q), so that |q|^2 can
+    # neither underflow nor overflow.
+    s = unit_scale(max_abs(*(q[..., i] for i in range(4))))[..., None]
+    q, qd = q * s, qd * s
     qc = _conjugate(q)
     prod = _multiply(qc, qd) if frame == "body" else _multiply(qd, qc)
-    n2 = jnp.sum(q * q, axis=-1, keepdims=True)
-    return (2 * prod[..., :3] / n2).astype(dt)
+    x, y, z, w = (q[..., i : i + 1] for i in range(4))
+    return (2 * prod[..., :3] / (x * x + y * y + z * z + w * w)).astype(dt)
 
 
 @public

@@ -4,125 +4,49 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from ._eigen import nearest_quaternion
-from ._numerics import (
-    as_float,
-    check_shape,
-    from_scalar_last,
-    like_rank,
-    max_abs,
-    public,
-    rsqrt,
-    unit_scale,
-)
+from ._numerics import as_float, check_shape, from_scalar_last, max_abs, public, rsqrt, unit_scale
+from ._shepperd import entries, k4_columns, masks, select, select_column, stack_last
 
 METHODS = ("shepperd", "markley", "optimal")
 
 
-def _k4_columns(R, one=1.0):
-    """The four columns of ``K = 4 q q^T + (trace-free noise terms)`` as polynomials in ``R``.
-
-    For a rotation matrix ``R = R(q)`` (active, scalar-last ``q``) column ``i`` equals
-    ``4 q_i q``; Baruh/Kamman Eqs. (2)-(8) transposed to the active convention. Each candidate is
-    exact arithmetic on the entries of ``R`` (no division, no root), so the selection below is
-    branch-free and every candidate stays finite.
-
-    ``one`` is the ``1 = |q|^2`` on the diagonal. For a scaled rotation ``t R(q)`` the columns
-    are ``4 t q_i q`` with ``one = t``: passing an estimate of ``t`` (homogeneous of degree 1
-    in ``R``) makes ``K`` homogeneous, so that every quaternion read from it is scale
-    invariant. Replacing 1 by ``t`` adds ``(t - 1) I``, which changes no eigenvector.
-    """
-    r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
-    r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
-    r20, r21, r22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
-    # diagonal of K minus 1: 4x^2-1, 4y^2-1, 4z^2-1, 4w^2-1
-    dx = r00 - r11 - r22
-    dy = r11 - r00 - r22
-    dz = r22 - r00 - r11
-    dw = r00 + r11 + r22
-    sxy, sxz, syz = r01 + r10, r02 + r20, r12 + r21
-    ax, ay, az = r21 - r12, r02 - r20, r10 - r01
-    cols = (
-        (one + dx, sxy, sxz, ax),
-        (sxy, one + dy, syz, ay),
-        (sxz, syz, one + dz, az),
-        (ax, ay, az, one + dw),
-    )
-    return cols, (dx, dy, dz, dw)
-
-
-def _select(masks, vals):
-    """``vals[i]`` for the first true mask ``(use_x, use_y, use_z)``, else ``vals[3]``.
-
-    Nested ``jnp.where`` fuses into the surrounding XLA loop (an argmax + gather does not), and
-    unlike a one-hot product it cannot turn ``0 * inf`` into NaN.
-    """
-    use_x, use_y, use_z = masks
-    v = jnp.where(use_z, vals[2], vals[3])
-    v = jnp.where(use_y, vals[1], v)
-    return jnp.where(use_x, vals[0], v)
-
-
 def _prescaled(R):
-    """``R`` times a power of two that brings its largest entry into ``[0.5, 2)`` (exact; 1 for
-    a rotation matrix), so that no product below overflows or underflows, and its squared
-    Frobenius norm; both NaN where ``R`` is zero or has a non-finite entry (not a rotation)."""
-    r = [R[..., k, j] for k in range(3) for j in range(3)]
+    """The nine entries of ``R`` (row by row) times a power of two ``s`` that brings the largest
+    into ``[0.5, 2)`` (exact; 1 for a rotation matrix), so that no product below overflows or
+    underflows; their squared Frobenius norm; whether ``R`` is a candidate rotation (not zero,
+    every entry finite); and ``s``. Per-rotation scalars: XLA:CPU applies the scale inside the
+    one loop that reads ``R`` (a scaled copy of ``R`` would be a loop of its own)."""
+    r = entries(R)
     s = unit_scale(max_abs(*r))
-    f2 = sum((x * s) * (x * s) for x in r)  # a scalar sum, not jnp.sum: one fused loop
-    ok = (f2 > 0) & jnp.isfinite(f2)
-    R = jnp.where(ok[..., None, None], R * s[..., None, None], jnp.nan)
-    return R, jnp.where(ok, f2, jnp.nan), s
+    r = [x * s for x in r]
+    f2 = sum(x * x for x in r)
+    return r, f2, (f2 > 0) & (f2 < jnp.inf), s
 
 
 def _scaled_k(R):
-    """The columns of the homogeneous ``K`` (see :func:`_k4_columns`) of the prescaled ``R``,
-    with ``t = |R|_F / sqrt(3)`` (1 for a rotation matrix, ``s`` for ``s`` times one), and the
-    ``d`` terms. NaN throughout for a zero or non-finite ``R``."""
-    R, f2, _ = _prescaled(R)
+    """The columns of the homogeneous ``K`` (see :func:`rotjax._shepperd.k4_columns`) of the
+    prescaled ``R``, with ``t = |R|_F / sqrt(3)`` (1 for a rotation matrix, ``s`` for ``s``
+    times one), and the ``d`` terms. ``t`` is NaN for a zero or non-finite ``R``, and so is
+    every column :func:`rotjax._shepperd.select_column` returns (the NaN is put into the scale,
+    not into a copy of ``R``)."""
+    r, f2, ok, _ = _prescaled(R)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
-    return _k4_columns(R, jnp.sqrt(h))  # correctly rounded: the same bits in every program
-
-
-def _masks(diag):
-    """``(use_x, use_y, use_z)`` for :func:`_select`: the largest diagonal entry of ``K``."""
-    dx, dy, dz, dw = diag
-    return (dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw
-
-
-def _select_column(cols, diag):
-    """The column of ``K`` with the largest diagonal entry, as four per-rotation arrays, and its
-    squared norm, at least ``t^2 >= 1/12`` (the four diagonal entries of ``K`` sum to ``4 t``,
-    so the largest is at least ``t``): no small divisor, and :func:`rsqrt`'s domain."""
-    masks = _masks(diag)
-    c = [_select(masks, [col[i] for col in cols]) for i in range(4)]
-    return c, sum(x * x for x in c)
+    return k4_columns(r, jnp.where(ok, h * rsqrt(h), jnp.nan))
 
 
 def _selected_column(R):
-    """:func:`_select_column` of the prescaled, homogeneous ``K`` of ``R``."""
-    return _select_column(*_scaled_k(R))
+    """:func:`rotjax._shepperd.select_column` of the prescaled, homogeneous ``K`` of ``R``."""
+    return select_column(*_scaled_k(R))
 
 
-def _hemisphere_scale(v, sq, root=rsqrt):
-    """``1 / |v|`` (``sq = |v|^2``, away from 0: see :func:`_select_column`), negated where
-    ``w < 0``: ``v * scale`` is the unit quaternion with ``w >= 0``.
-
-    ``root``: :func:`rsqrt` (default), which XLA fuses into the loop that writes the four
-    components. With ``jnp.sqrt`` it gives the signed norm instead (:func:`_signed_norm`).
-    """
-    s = root(sq)
+def _hemisphere_scale(v, sq):
+    """``1 / |v|`` (``sq = |v|^2``, away from 0: see :func:`rotjax._shepperd.select_column`),
+    negated where ``w < 0``: ``v * scale`` is the unit quaternion with ``w >= 0``. :func:`rsqrt`
+    (multiplications and additions only) fuses into the loop that writes the components."""
+    s = rsqrt(sq)
     return jnp.where(v[3] < 0, -s, s)
-
-
-def _stack_last(v, scale):
-    """``(..., 4)`` from four per-rotation components times a per-rotation scale.
-
-    Stacked on a leading axis and moved last: XLA:CPU emits one transposing loop.
-    """
-    return jnp.moveaxis(jnp.stack(v, axis=0) * scale[None], 0, -1)
 
 
 @jax.custom_jvp
@@ -135,92 +59,40 @@ def _shepperd(R):
     single transposing loop that reads the matrix once. JAX differentiates this code itself:
     every operation has a finite derivative wherever it is reached (the divisor is at least
     ``t^2``), and at a switch of the selected column it is the derivative of the branch taken.
-    The rule below is that derivative, written for reverse mode (tested equal to JAX's).
+    The rule below is that derivative, written on per-rotation scalars (tested equal to JAX's).
     """
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
-    return _stack_last(c, _hemisphere_scale(c, sq))
-
-
-def _dk_pattern():
-    """``P[a, b, k, j]``: the derivative of ``K[a, b]`` with respect to ``R[k, j]`` (``K`` is
-    affine in ``R``; read off :func:`_k4_columns` on unit matrices, in NumPy)."""
-    out = np.zeros((4, 4, 3, 3))
-    for k in range(3):
-        for j in range(3):
-            e = np.zeros((3, 3))
-            e[k, j] = 1.0
-            cols, _ = _k4_columns(e, 0.0)
-            out[:, :, k, j] = np.array(cols).T
-    return out
-
-
-_DK_PATTERN = _dk_pattern()
+    return stack_last(c, _hemisphere_scale(c, sq))
 
 
 def _shepperd_tangent(R, dR):
-    # JAX's derivative of _shepperd, term by term: R1 = s R (s a constant power of two),
-    # t = h rsqrt(h) with h = |R1|^2 / 3, so dt = tau dh, tau = y (1 - h y^2 / 2), y = rsqrt(h)
-    # (rsqrt's rule); dc = dK e_i for the selected column i (the masks are constant);
-    # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc. dR enters only through
-    # u_a = sum(M_a * dR) with M_a = z s (dK[a, i] / dR + (2/3) tau R1 [a = i]), elementwise
-    # products whose transpose (reverse mode) is one loop writing the cotangent of R.
-    R1, f2, s = _prescaled(R)
+    # JAX's derivative of _shepperd, term by term: r = s R (s a constant power of two),
+    # t = h rsqrt(h) with h = |r|^2 / 3, so dt = tau dh, tau = y (1 - h y^2 / 2), y = rsqrt(h)
+    # (rsqrt's rule); K is linear in (r, t), so dc = the same column of K(dr, dt) (the masks
+    # are constant); q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc.
+    r, f2, ok, s = _prescaled(R)
     h = f2 / 3
     y = rsqrt(h)
-    cols, diag = _k4_columns(R1, h * y)
-    use_x, use_y, use_z = _masks(diag)
-    sel = [use_x, ~use_x & use_y, ~use_x & ~use_y & use_z, ~use_x & ~use_y & ~use_z]
-    sel = [m.astype(R.dtype)[..., None, None] for m in sel]
-    c = [_select((use_x, use_y, use_z), [col[a] for col in cols]) for a in range(4)]
+    cols, diag = k4_columns(r, jnp.where(ok, h * y, jnp.nan))
+    m = masks(diag)
+    c = [select(m, [col[a] for col in cols]) for a in range(4)]
     z = _hemisphere_scale(c, sum(x * x for x in c))
+    dr = [x * s for x in entries(dR)]
+    dh = (2.0 / 3.0) * sum(a * b for a, b in zip(r, dr, strict=True))
+    dt = y * (1.0 - 0.5 * h * y * y) * dh
+    dcols, _ = k4_columns(dr, dt)
+    u = [z * select(m, [col[a] for col in dcols]) for a in range(4)]
     q = [x * z for x in c]
-    zs = (z * s)[..., None, None]
-    dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * R1
-    u = []
-    for a in range(4):
-        m = sum(sel[b] * like_rank(_DK_PATTERN[a, b], R) for b in range(4)) + sel[a] * dt
-        u.append(jnp.sum((zs * m) * dR, axis=(-2, -1)))
-    qu = sum(q[a] * u[a] for a in range(4))
-    return jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
+    qu = sum(a * b for a, b in zip(q, u, strict=True))
+    return stack_last([a - b * qu for a, b in zip(u, q, strict=True)], jnp.ones_like(qu))
 
 
 @_shepperd.defjvp
 def _shepperd_jvp(primals, tangents):
     (R,), (dR,) = primals, tangents
     return _shepperd(R), _shepperd_tangent(R, dR)
-
-
-def _signed_norm(c, sq):
-    """``sqrt(sq)`` (``sq = |c|^2``) with the sign of ``c[3]``: ``c / n`` is the unit quaternion
-    with ``w >= 0`` (for the selected column, the Shepperd quaternion; up to rounding, ``c``
-    times :func:`_hemisphere_scale`, the same sign rule with the reciprocal root)."""
-    return _hemisphere_scale(c, sq, jnp.sqrt)
-
-
-def _divide_stacked(parts, n):
-    """``(..., k)``: the parts (per-rotation arrays) stacked last and divided by ``n`` stacked
-    alike. XLA:CPU keeps the division (a divisor broadcast from ``(..., 1)`` was turned into a
-    multiplication by its reciprocal), so the quotients are the same bits as ``p / n``."""
-    return jnp.stack(parts, axis=-1) / jnp.stack([n] * len(parts), axis=-1)
-
-
-@jax.custom_jvp
-def _shepperd_divided(R):
-    """The Shepperd quaternion as the selected column divided by its signed norm (stacked, see
-    :func:`_divide_stacked`), for ``matrix_to_euler``: XLA:CPU writes it out once, where with
-    a reciprocal square root it recomputed parts of it inside the Euler extraction. The same
-    function as :func:`_shepperd` up to rounding, with the same derivative rule (tested equal
-    to JAX's derivative of this code)."""
-    c, sq = _selected_column(R)
-    return _divide_stacked(c, _signed_norm(c, sq))
-
-
-@_shepperd_divided.defjvp
-def _shepperd_divided_jvp(primals, tangents):
-    (R,), (dR,) = primals, tangents
-    return _shepperd_divided(R), _shepperd_tangent(R, dR)
 
 
 def _k_times(cols, p):
@@ -237,10 +109,10 @@ def _markley(R):
     and unstacked in between: that cost a transposing loop).
     """
     cols, diag = _scaled_k(R)
-    c, sq = _select_column(cols, diag)
+    c, sq = select_column(cols, diag)
     s0 = _hemisphere_scale(c, sq)
     v = _k_times(cols, [x * s0 for x in c])
-    return _stack_last(v, _hemisphere_scale(v, sum(x * x for x in v)))
+    return stack_last(v, _hemisphere_scale(v, sum(x * x for x in v)))
 
 
 def _from_matrix(R, method: str):

@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
-from ._numerics import as_float, check_shape, from_scalar_last, public, select, to_scalar_last
-from ._quaternion import _prescaled
+from ._numerics import (
+    as_float,
+    check_shape,
+    exponent_scale,
+    from_scalar_last,
+    public,
+    rsqrt,
+    select,
+    to_scalar_last,
+)
+from ._quaternion import _prescaled_parts, _stack
 
 
 @public
@@ -27,11 +37,13 @@ def quaternion_to_mrp(q, scalar_first: bool = False):
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
-    q = _prescaled(to_scalar_last(q, scalar_first))  # any finite scale: |q|^2 stays in range
-    n = jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))  # zero quaternion: 0/0 = NaN
-    w = q[..., 3:]
-    s = select(w < 0, -1.0, 1.0, q.dtype)
-    return (s * q[..., :3] / (n + s * w)).astype(dt)
+    # Any finite scale: |q|^2 stays in range; NaN for the zero quaternion or a non-finite one.
+    (x, y, z, w), _ = _prescaled_parts(to_scalar_last(q, scalar_first))
+    n2 = x * x + y * y + z * z + w * w
+    s = select(w < 0, -1.0, 1.0, w.dtype)
+    d = n2 * rsqrt(n2) + s * w  # |q| + |w|, at least |q| >= 1/2: rsqrt's domain when squared
+    k = s * rsqrt(d * d)
+    return _stack([k * x, k * y, k * z]).astype(dt)
 
 
 @public
@@ -53,5 +65,14 @@ def mrp_to_quaternion(mrp, scalar_first: bool = False):
     (p,), dt = as_float(mrp)
     check_shape(p, (3,), "mrp")
     p2 = jnp.sum(p * p, axis=-1, keepdims=True)
+    # Beyond |p| = 1 the same rotation's other MRP, p' = -p / |p|^2 (|p'| < 1), gives
+    # q(p) = -q(p'): |p|^2 could overflow (|p| > 1e154 in float64). p / |p|^2 is formed from
+    # p scaled by a power of two s (exact): s^2 (s p) / |s p|^2, each factor in range.
+    outer = p2 > 1
+    s, _ = exponent_scale(jax.lax.stop_gradient(jnp.max(jnp.abs(p), axis=-1, keepdims=True)))
+    u = p * s
+    u2 = jnp.sum(u * u, axis=-1, keepdims=True)
+    p = jnp.where(outer, -u * (s / jnp.where(outer, u2, 1.0)), p)  # double where
+    p2 = jnp.sum(p * p, axis=-1, keepdims=True)
     q = jnp.concatenate([2 * p, 1 - p2], axis=-1) / (1 + p2)
-    return from_scalar_last(q, scalar_first).astype(dt)
+    return from_scalar_last(jnp.where(outer, -q, q), scalar_first).astype(dt)

@@ -8,16 +8,17 @@ conjugate) do not, because kinematics needs them on non-unit quaternions.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from ._numerics import (
     as_float,
     check_shape,
-    cross,
     from_scalar_last,
     like_rank,
     max_abs,
     public,
+    rsqrt,
     safe_atan2,
     scaled_norm,
     to_scalar_last,
@@ -39,14 +40,28 @@ def _prep2(p, q, scalar_first, names=("p", "q")):
     return to_scalar_last(p, scalar_first), to_scalar_last(q, scalar_first), dt
 
 
+def _prescaled_parts(q):
+    """The four components of ``q`` (per-rotation arrays) times a power of two ``s`` that brings
+    the largest into ``[0.5, 2)`` (exact; 1 for a unit quaternion), so that squared norms and
+    products neither overflow nor underflow, and ``s``. ``s`` is NaN where ``q`` is zero or a
+    component is infinite or NaN (not a rotation): the NaN is put into the scale, which XLA
+    applies inside the loop that reads ``q``, rather than into a copy of ``q``."""
+    parts = [q[..., i] for i in range(4)]
+    big = jax.lax.stop_gradient(max_abs(*parts))
+    s = jnp.where((big > 0) & (big < jnp.inf), unit_scale(big), jnp.nan)
+    return [x * s for x in parts], s
+
+
 def _prescaled(q):
-    """``q`` times a power of two that brings its largest component into ``[0.5, 2)`` (exact;
-    1 for a unit quaternion), so that squared norms and products neither overflow nor
-    underflow; NaN where a component is infinite or NaN (not a rotation). A function of the
-    rotation gives the same result for ``q`` and for this."""
-    big = max_abs(*jnp.moveaxis(q, -1, 0))
-    s = unit_scale(big)[..., None]
-    return jnp.where(jnp.isfinite(big)[..., None], q * s, jnp.nan)
+    """:func:`_prescaled_parts` stacked: ``q`` scaled, NaN where it is not a rotation. A
+    function of the rotation gives the same result for ``q`` and for this."""
+    return _stack(_prescaled_parts(q)[0])
+
+
+def _stack(parts):
+    """``(..., k)`` from ``k`` per-rotation arrays: stacked on a leading axis and moved last,
+    which XLA:CPU writes in one transposing loop."""
+    return jnp.moveaxis(jnp.stack(parts, axis=0), 0, -1)
 
 
 def _multiply(p, q):
@@ -85,8 +100,14 @@ def _renormalize(q):
 
 def _to_matrix(q):
     """Rotation matrix of a scalar-last quaternion of any non-zero norm."""
-    x, y, z, w = jnp.moveaxis(q, -1, 0)
-    s = 2 / (x * x + y * y + z * z + w * w)  # folds the normalisation into one division
+    return _to_matrix_parts(*(q[..., i] for i in range(4)))
+
+
+def _to_matrix_parts(x, y, z, w):
+    """Rotation matrix of a quaternion given by its components (per-rotation arrays), of
+    non-zero norm, squared norm in rsqrt's domain."""
+    r = rsqrt(x * x + y * y + z * z + w * w)
+    s = 2 * r * r  # 2 / |q|^2: folds the normalisation into the products; no division
     xx, yy, zz = s * x * x, s * y * y, s * z * z
     xy, xz, yz = s * x * y, s * x * z, s * y * z
     xw, yw, zw = s * x * w, s * y * w, s * z * w
@@ -128,7 +149,7 @@ def quaternion_to_matrix(q, scalar_first: bool = False):
         ``-q`` give the same matrix.
     """
     q, dt = _prep(q, scalar_first)
-    return _to_matrix(_prescaled(q)).astype(dt)
+    return _to_matrix_parts(*_prescaled_parts(q)[0]).astype(dt)
 
 
 @public
@@ -175,8 +196,10 @@ def quaternion_inverse(q, scalar_first: bool = False):
         ``(..., 4)`` inverse, in the same layout.
     """
     q, dt = _prep(q, scalar_first)
-    inv = _conjugate(q) / jnp.sum(q * q, axis=-1, keepdims=True)
-    return from_scalar_last(inv, scalar_first).astype(dt)
+    (x, y, z, w), s = _prescaled_parts(q)  # conj(q) / |q|^2 = s conj(s q) / |s q|^2
+    r = rsqrt(x * x + y * y + z * z + w * w)
+    k = s * r * r
+    return from_scalar_last(_stack([-x * k, -y * k, -z * k, w * k]), scalar_first).astype(dt)
 
 
 @public
@@ -209,12 +232,15 @@ def quaternion_apply(q, v, scalar_first: bool = False):
     (q, v), dt = as_float(q, v)
     check_shape(q, (4,), "q")
     check_shape(v, (3,), "v")
-    q = _prescaled(to_scalar_last(q, scalar_first))
-    qv, w = q[..., :3], q[..., 3:]
-    s = 2 / jnp.sum(q * q, axis=-1, keepdims=True)
-    t = cross(qv, v)
-    out = v + s * (w * t + cross(qv, t))
-    return out.astype(dt)
+    (x, y, z, w), _ = _prescaled_parts(to_scalar_last(q, scalar_first))
+    r = rsqrt(x * x + y * y + z * z + w * w)  # the unit quaternion, on per-rotation scalars
+    x, y, z, w = x * r, y * r, z * r, w * r
+    a, b, c = (v[..., i] for i in range(3))
+    # t = 2 q_v x v; R(q) v = v + w t + q_v x t
+    t0, t1, t2 = 2 * (y * c - z * b), 2 * (z * a - x * c), 2 * (x * b - y * a)
+    out = [a + w * t0 + (y * t2 - z * t1), b + w * t1 + (z * t0 - x * t2)]
+    out.append(c + w * t2 + (x * t1 - y * t0))
+    return _stack(out).astype(dt)
 
 
 @public

@@ -316,3 +316,46 @@ def test_quaternion_mean_gives_nan_for_a_non_rotation_in_its_own_set(bad):
     bad_set = sets[2].copy()
     bad_set[1] = BAD_QUATERNIONS[bad]
     _assert_nan_in_its_own_element(jax.jit(rj.quaternion_mean), sets, bad_set)
+
+
+# --- the residue: the last readers of |q|^2 and |p|^2 ------------------------------------------
+
+
+@pytest.mark.parametrize(("dtype", "scale"), CASES, ids=IDS)
+def test_angular_velocity_from_a_quaternion_derivative_is_scale_invariant(dtype, scale):
+    """omega(s q, s q') = omega(q, q'): |q|^2 of 1e-60 (float32) underflowed to 0 and gave NaN
+    or inf; of 1e60, inf and 0."""
+    q = Q.astype(dtype)
+    q_dot = np.random.default_rng(46).normal(size=Q.shape).astype(dtype)
+    eps = np.finfo(dtype).eps
+    for frame in ("body", "world"):
+        want = np.asarray(rj.quaternion_derivative_to_angular_velocity(q, q_dot, frame=frame))
+        got = rj.quaternion_derivative_to_angular_velocity(
+            q * dtype(scale), q_dot * dtype(scale), frame=frame
+        )
+        assert_close(got, want, atol=8 * eps * np.abs(want).max(), err_msg=frame)
+
+
+@pytest.mark.parametrize(("dtype", "scale"), CASES, ids=IDS)
+def test_quaternion_inverse_at_any_scale(dtype, scale):
+    """inverse(s q) = inverse(q) / s: |s q|^2 must neither underflow nor overflow."""
+    q = Q.astype(dtype)
+    want = np.asarray(rj.quaternion_inverse(q))
+    got = np.asarray(rj.quaternion_inverse(q * dtype(scale))).astype(np.float64) * scale
+    assert_close(got, want, atol=4 * np.finfo(dtype).eps)
+
+
+@pytest.mark.parametrize("dtype", list(SCALES))
+def test_mrp_to_quaternion_of_any_norm(dtype):
+    """(2 p, 1 - |p|^2) / (1 + |p|^2) for |p| up to the largest scale (|p|^2 overflowed beyond
+    1e154 in float64, 1e19 in float32, and gave NaN), against mpmath."""
+    mp = pytest.importorskip("mpmath")
+    mp.mp.dps = 40
+    axis = np.array([0.48, -0.6, 0.64])
+    for s in [0.3, 1.0, 7.0, *SCALES[dtype]]:
+        p = (axis * s).astype(dtype)
+        pm = [mp.mpf(float(x)) for x in p]
+        p2 = sum(x * x for x in pm)
+        want = [float(2 * x / (1 + p2)) for x in pm] + [float((1 - p2) / (1 + p2))]
+        got = np.asarray(rj.mrp_to_quaternion(p)).astype(np.float64)
+        assert_close(got, want, atol=4 * np.finfo(dtype).eps, err_msg=f"|p| = {s:g}")
