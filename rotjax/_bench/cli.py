@@ -156,6 +156,13 @@ def main(argv: list[str] | None = None) -> int:
         "sets are kept whatever the number",
     )
     p.add_argument(
+        "--skip-grad",
+        default="",
+        metavar="CONTENDERS",
+        help="comma-separated contenders (impl:method, e.g. rotjax:markley) whose jit(grad) is "
+        "not timed, noted in bench.json",
+    )
+    p.add_argument(
         "--pin-malloc",
         action="store_true",
         help="glibc's mmap and trim thresholds at 1 GiB (default: glibc's defaults, as users run)",
@@ -180,6 +187,7 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.perf_counter()
     ops = args.ops.split(",") if args.ops else None
+    skip_grad = [c for c in args.skip_grad.split(",") if c]
 
     def make_meta():
         return {
@@ -194,6 +202,7 @@ def main(argv: list[str] | None = None) -> int:
             << (args.log2_batch if args.log2_batch is not None else (16 if args.quick else 20)),
             "malloc_env": {k: os.environ.get(k) for k in MALLOC_ENV},
             **settings(args.quick, args.rounds, args.accuracy_samples),
+            "grad_not_timed": skip_grad,
             "seconds": round(time.perf_counter() - t0, 1),
             "columns": list(report.COLUMNS),
         }
@@ -201,7 +210,9 @@ def main(argv: list[str] | None = None) -> int:
     def partial(rows):  # the operations measured so far, should the run be cut short
         (out_dir / "bench.partial.json").write_text(report.dumps(make_meta(), _json_rows(rows)))
 
-    rows = run(args.quick, ops, args.log2_batch, args.rounds, args.accuracy_samples, partial)
+    rows = run(
+        args.quick, ops, args.log2_batch, args.rounds, args.accuracy_samples, partial, skip_grad
+    )
     meta = make_meta()
     text = report.table(rows)  # before the JSON conversion: an infinite error prints as inf
     rows = _json_rows(rows)

@@ -250,6 +250,8 @@ def provenance(meta) -> str:
         )
         + f"; {allocator(meta)}."
     )
+    if meta.get("grad_not_timed"):
+        line += f" jit(grad) not timed for {', '.join(meta['grad_not_timed'])}."
     for later in later_runs(meta):
         on = f" on {_machine(later['machine'])}" if later.get("machine") else ""
         line += f" Rows of {', '.join(later['ops'])} from a run of {later['date']}{on}."

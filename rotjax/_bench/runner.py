@@ -31,12 +31,19 @@ def settings(quick: bool, rounds=None, accuracy_samples=None) -> dict:
 
 
 def run(
-    quick: bool, ops=None, log2_batch=None, rounds=None, accuracy_samples=None, done=None
+    quick: bool,
+    ops=None,
+    log2_batch=None,
+    rounds=None,
+    accuracy_samples=None,
+    done=None,
+    skip_grad=(),
 ) -> list[dict]:
     """The rows of the benchmark (see ``report.COLUMNS``) for ``ops`` (default: every case,
     or the quick ones), on a batch of ``2**log2_batch`` rotations, in ``rounds`` interleaved
     rounds, with ``accuracy_samples`` inputs per accuracy set (see :func:`settings`).
-    ``done(rows)``, if given, is called with the rows so far after each operation."""
+    ``done(rows)``, if given, is called with the rows so far after each operation;
+    ``skip_grad``: contenders (``impl:method`` labels) whose ``jit(grad)`` is not timed."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -99,6 +106,7 @@ def run(
                 entries[key] = (compiled, x_in)
                 # --quick differentiates only rotjax's default method (compiling is the cost)
                 want_grad = not quick or (impl == "rotjax" and method == cont[0][1])
+                want_grad = want_grad and f"{impl}:{method}".rstrip(":") not in skip_grad
                 if want_grad and case.grad and dt in ("float32", "float64"):
                     try:
                         g = jax.jit(jax.grad(lambda x, f=f_timed: T.total(f(x))))
