@@ -482,3 +482,9 @@ def test_merge_replaces_the_measured_operations_and_notes_the_run():
     other = {**new_meta, "machine": {"cpu": "Other CPU", "cores": 2}}
     elsewhere, _ = R.merge({**meta, "machine": {"cpu": "CPU", "cores": 2}}, rows, other, rows[:1])
     assert "from a run of d1 on Other CPU (2 cores)" in R.provenance(elsewhere)
+    # each merged run keeps its own allocator, in the machine paragraph and its tables' captions
+    pinned = {**other, "malloc_env": dict(cli.MALLOC_ENV), "date": "2000-01-02"}
+    mixed, _ = R.merge({**meta, "date": "2000-01-01"}, rows, pinned, rows[:1])
+    assert "pinned at 1 GiB" in R.provenance(mixed)
+    assert "pinned at 1 GiB" in R.caption(mixed, [ops[0]])
+    assert "glibc's default malloc" in R.caption(mixed, [ops[1]])

@@ -103,6 +103,9 @@ def merge(meta, rows, new_meta, new_rows, why=""):
     later = [e for e in later if e["ops"]]
     entry = {"ops": sorted(ops, key=order.get), "date": new_meta["date"]}
     entry.update(seconds=new_meta.get("seconds"), versions=new_meta.get("versions"))
+    for key in ("malloc_env", "commit", "rounds", "accuracy_samples"):
+        if key in new_meta:
+            entry[key] = new_meta[key]
     if new_meta.get("machine") != meta.get("machine"):
         entry["machine"] = new_meta.get("machine")
     if why:
@@ -200,25 +203,28 @@ def _batch(meta) -> str:
 
 
 def _run_of(meta, ops):
-    """``(date, machine)`` of the run that measured ``ops`` (a merged later run or the main)."""
-    date, machine = meta.get("date"), meta.get("machine", {})
+    """``(date, machine, allocator)`` of the run that measured ``ops`` (a merged run or the
+    main one)."""
+    date, machine, alloc = meta.get("date"), meta.get("machine", {}), allocator(meta)
     for later in later_runs(meta):
         if set(ops) & set(later["ops"]):
             date, machine = later["date"], later.get("machine") or machine
-    return date, machine
+            alloc = allocator(later) if "malloc_env" in later else alloc
+    return date, machine, alloc
 
 
 def caption(meta, ops) -> str:
     """One line under each generated table: machine, device, dates, batch and allocator of the
     runs that measured ``ops``."""
-    runs = [_run_of(meta, [op]) for op in ops] or [(meta.get("date"), meta.get("machine", {}))]
-    dates = sorted({d[:10] for d, _ in runs})
-    machines = list(dict.fromkeys(_machine(m) for _, m in runs))
+    runs = [_run_of(meta, [op]) for op in ops] or [_run_of(meta, [])]
+    dates = sorted({d[:10] for d, _, _ in runs})
+    machines = list(dict.fromkeys(_machine(m) for _, m, _ in runs))
+    allocs = list(dict.fromkeys(a for _, _, a in runs))
     when = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
     quick = ", --quick" if meta.get("quick") else ""
     return (
         f"*{' and '.join(machines)}, {_device(meta)}; measured {when}; batch {_batch(meta)}"
-        f"{quick}; {allocator(meta)}.*"
+        f"{quick}; {' and '.join(allocs)}.*"
     )
 
 
@@ -254,7 +260,8 @@ def provenance(meta) -> str:
         line += f" jit(grad) not timed for {', '.join(meta['grad_not_timed'])}."
     for later in later_runs(meta):
         on = f" on {_machine(later['machine'])}" if later.get("machine") else ""
-        line += f" Rows of {', '.join(later['ops'])} from a run of {later['date']}{on}."
+        alloc = f", {allocator(later)}" if "malloc_env" in later else ""
+        line += f" Rows of {', '.join(later['ops'])} from a run of {later['date']}{on}{alloc}."
     return line
 
 
@@ -455,7 +462,7 @@ def figure(meta, rows, panel):
     fig.legend(handles=by_colour, title="contender (colour)", bbox_to_anchor=(0.68, 0.87), **kw)
     y = 0.87 - 0.058 * (len(shown) + 1.6)
     fig.legend(handles=by_marker, title="dtype (marker)", bbox_to_anchor=(0.68, y), **kw)
-    date, m = _run_of(meta, [op])
+    date, m, _ = _run_of(meta, [op])
     fig.suptitle(
         f"{_machine(m)}, {_device(meta)}, {date[:10]}, batch {_batch(meta)}",
         fontsize=9,
