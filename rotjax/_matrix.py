@@ -4,9 +4,19 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._eigen import nearest_quaternion
-from ._numerics import as_float, check_shape, from_scalar_last, max_abs, public, rsqrt, unit_scale
+from ._numerics import (
+    as_float,
+    check_shape,
+    from_scalar_last,
+    like_rank,
+    max_abs,
+    public,
+    rsqrt,
+    unit_scale,
+)
 from ._shepperd import entries, k4_columns, masks, select, select_column, stack_last
 
 METHODS = ("shepperd", "markley", "optimal")
@@ -67,26 +77,48 @@ def _shepperd(R):
     return stack_last(c, _hemisphere_scale(c, sq))
 
 
+def _dk_pattern():
+    """``P[a, b, k, j]``: the derivative of ``K[a, b]`` with respect to ``R[k, j]`` (``K`` is
+    affine in ``R``; read off :func:`rotjax._shepperd.k4_columns` on unit matrices, in NumPy)."""
+    out = np.zeros((4, 4, 3, 3))
+    for k in range(3):
+        for j in range(3):
+            e = np.zeros((3, 3))
+            e[k, j] = 1.0
+            cols, _ = k4_columns(entries(e), 0.0)
+            out[:, :, k, j] = np.array(cols).T
+    return out
+
+
+_DK_PATTERN = _dk_pattern()
+
+
 def _shepperd_tangent(R, dR):
     # JAX's derivative of _shepperd, term by term: r = s R (s a constant power of two),
     # t = h rsqrt(h) with h = |r|^2 / 3, so dt = tau dh, tau = y (1 - h y^2 / 2), y = rsqrt(h)
-    # (rsqrt's rule); K is linear in (r, t), so dc = the same column of K(dr, dt) (the masks
-    # are constant); q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc.
+    # (rsqrt's rule); dc = dK e_i for the selected column i (the masks are constant);
+    # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc. dR enters only through
+    # u_a = sum(M_a * dR) with M_a = z s (dK[a, i] / dR + (2/3) tau r [a = i]), elementwise
+    # products whose transpose (reverse mode) is one loop writing the cotangent of R (slices
+    # of dR would transpose to nine pads, each evaluated for every entry).
     r, f2, ok, s = _prescaled(R)
     h = f2 / 3
     y = rsqrt(h)
     cols, diag = k4_columns(r, jnp.where(ok, h * y, jnp.nan))
-    m = masks(diag)
+    use_x, use_y, use_z = m = masks(diag)
+    sel = [use_x, ~use_x & use_y, ~use_x & ~use_y & use_z, ~use_x & ~use_y & ~use_z]
+    sel = [b.astype(R.dtype)[..., None, None] for b in sel]
     c = [select(m, [col[a] for col in cols]) for a in range(4)]
     z = _hemisphere_scale(c, sum(x * x for x in c))
-    dr = [x * s for x in entries(dR)]
-    dh = (2.0 / 3.0) * sum(a * b for a, b in zip(r, dr, strict=True))
-    dt = y * (1.0 - 0.5 * h * y * y) * dh
-    dcols, _ = k4_columns(dr, dt)
-    u = [z * select(m, [col[a] for col in dcols]) for a in range(4)]
     q = [x * z for x in c]
-    qu = sum(a * b for a, b in zip(q, u, strict=True))
-    return stack_last([a - b * qu for a, b in zip(u, q, strict=True)], jnp.ones_like(qu))
+    zs = (z * s)[..., None, None]
+    dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * (R * s[..., None, None])
+    u = []
+    for a in range(4):
+        ma = sum(sel[b] * like_rank(_DK_PATTERN[a, b], R) for b in range(4)) + sel[a] * dt
+        u.append(jnp.sum((zs * ma) * dR, axis=(-2, -1)))
+    qu = sum(q[a] * u[a] for a in range(4))
+    return jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
 
 
 @_shepperd.defjvp

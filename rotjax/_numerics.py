@@ -44,8 +44,8 @@ def matvec(a, x):
 # magic constant of the initial guess (relative error at most 3.4%), and the number of steps
 # (the error squares at each: 3.4e-2, 1.7e-3, 4.6e-6, 3.2e-11, 1.5e-21).
 _RSQRT_START = {
-    jnp.dtype(jnp.float32): (jnp.int32, 0x5F375A86, 3),
-    jnp.dtype(jnp.float64): (jnp.int64, 0x5FE6EB50C7B537A9, 4),
+    jnp.dtype(jnp.float32): (jnp.uint32, 0x5F375A86, 3),
+    jnp.dtype(jnp.float64): (jnp.uint64, 0x5FE6EB50C7B537A9, 4),
 }
 
 
@@ -65,7 +65,10 @@ def rsqrt(x):
     """
     int_type, magic, steps = _RSQRT_START[jnp.dtype(x.dtype)]
     bits = jax.lax.bitcast_convert_type(x, int_type)
-    y = jax.lax.bitcast_convert_type(jnp.asarray(magic, int_type) - (bits >> 1), x.dtype)
+    # Unsigned, so that the shift is a logical one: x86 has no vector arithmetic shift of
+    # 64-bit integers before AVX-512, and a signed one made the float64 loops scalar.
+    half = jax.lax.shift_right_logical(bits, jnp.asarray(1, int_type))
+    y = jax.lax.bitcast_convert_type(jnp.asarray(magic, int_type) - half, x.dtype)
     h = 0.5 * x
     for _ in range(steps - 1):
         y = y * (1.5 - h * y * y)
