@@ -292,6 +292,11 @@ def _substitute(abcd, locks):
     return a, b, c, d
 
 
+# The last angle in the output (`first` of an intrinsic sequence, `third` of an extrinsic one)
+# is the one set to 0 at exact lock.
+_LAST = np.array([False, False, True])
+
+
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def _quat_to_euler(q, seq):
     """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold.
@@ -312,13 +317,12 @@ def _quat_to_euler(q, seq):
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
-    out = [_atan2(num[n], den[n]) * f + c for n, f, c in zip(order, factor, shift, strict=True)]
+    ang = jnp.stack([_atan2(num[n], den[n]) for n in order], axis=-1)
+    out = ang * like_rank(factor, ang) + like_rank(shift, ang)
     # The substitution makes the zeroed angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: set it exactly.
-    out[2] = jnp.where(locks[0] | locks[1], jnp.zeros_like(out[2]), out[2])
-    # Per-rotation angles stacked on a leading axis and moved last: one loop over rotations,
-    # into which XLA:CPU fuses the scale (a stack on the last axis wrote it in a loop of its own).
-    return jnp.moveaxis(jnp.stack([jnp.where(bad, jnp.nan, a) for a in out], axis=0), 0, -1)
+    out = jnp.where((locks[0] | locks[1])[..., None] & like_rank(_LAST, out, bool), 0.0, out)
+    return jnp.where(bad[..., None], jnp.nan, out)
 
 
 @functools.cache
