@@ -67,6 +67,8 @@ from ._quaternion import quaternion_normalize as quaternion_normalize
 from ._quaternion import quaternion_to_matrix as quaternion_to_matrix
 from ._quaternion import relative_rotation as relative_rotation
 from ._quaternion import rotation_angle as rotation_angle
+from ._rigid import RigidTransform as RigidTransform
+from ._rigid import normalize_dual_quaternion as normalize_dual_quaternion
 from ._rotation import Rotation as Rotation
 from ._rotation import RotationSpline as RotationSpline
 from ._rotation import Slerp as Slerp
@@ -80,6 +82,7 @@ from ._rotvec import rotvec_to_quaternion as rotvec_to_quaternion
 __version__ = "0.1.0"
 
 __all__ = [
+    "RigidTransform",
     "Rotation",
     "RotationSpline",
     "Slerp",
@@ -107,6 +110,7 @@ __all__ = [
     "matrix_to_sixd",
     "mrp_to_quaternion",
     "nined_to_matrix",
+    "normalize_dual_quaternion",
     "partition_coordinates",
     "quaternion_apply",
     "quaternion_canonical",

@@ -1,0 +1,684 @@
+"""``RigidTransform``: scipy's rigid-transform API over rotjax's functions, as a pytree.
+
+The class holds two arrays, the ``(..., 4)`` scalar-last unit quaternion of the rotation and
+the ``(..., 3)`` translation, so that ``T v = R v + t``; every computation is one jitted
+function of those arrays, built on rotjax's quaternion and rotation-vector functions.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._fitting import quaternion_mean
+from ._matrix import matrix_to_quaternion
+from ._numerics import cross, matvec, public, to_scalar_last
+from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix
+from ._rotation import Rotation, _concrete, _float, _identity_quat, _input
+from ._rotvec import _exp_coeffs, _quat_to_rotvec, _rotvec_to_quat
+
+# --- SE(3) exponential coordinates ------------------------------------------------------
+#
+# exp([phi, v]) = (exp(phi), J(phi) v), J = I + a K + b K^2 with K = hat(phi) the left
+# Jacobian of SO(3); log inverts it with J^-1 = I - K / 2 + c K^2. With t = |phi|:
+#   a = (1 - cos t) / t^2,  b = (t - sin t) / t^3,  c = (1 - (t / 2) cot(t / 2)) / t^2.
+# a = 2 (sin(t/2) / t)^2 has no cancellation. b and c are power series in t^2 below
+# t^2 = 2.25, truncated where the next term is below float64 rounding, and the closed forms
+# above, where their cancellation costs at most a few eps: values and derivatives of every
+# order are exact at 0, and no threshold moves a result by more than rounding.
+
+_SERIES_MAX = 2.25
+# (-1)^k / (2k + 3)!, k = 0..10
+_B_SERIES = tuple((-1) ** k / float(np.prod(np.arange(1.0, 2 * k + 4))) for k in range(11))
+# |B_2n| / (2n)! (Bernoulli numbers), n = 1..12
+_C_SERIES = (
+    0.08333333333333333,
+    0.001388888888888889,
+    3.306878306878307e-05,
+    8.267195767195768e-07,
+    2.08767569878681e-08,
+    5.284190138687493e-10,
+    1.3382536530684679e-11,
+    3.3896802963225827e-13,
+    8.586062056277845e-15,
+    2.174868698558062e-16,
+    5.5090028283602295e-18,
+    1.3954464685812522e-19,
+)
+
+
+def _horner(coeffs, x):
+    acc = jnp.full_like(x, coeffs[-1])
+    for c in coeffs[-2::-1]:
+        acc = acc * x + c
+    return acc
+
+
+def _jacobian_coeffs(t2):
+    """``(a, b)`` of the left Jacobian of SO(3), smooth functions of ``t2 = |phi|^2``."""
+    k, _ = _exp_coeffs(t2)  # sin(t/2) / t
+    small = t2 < _SERIES_MAX
+    t = jnp.sqrt(jnp.where(small, _SERIES_MAX, t2))  # double where: finite derivatives
+    b = jnp.where(small, _horner(_B_SERIES, jnp.where(small, t2, 0.0)), (t - jnp.sin(t)) / t**3)
+    return 2 * k * k, b
+
+
+def _inverse_coeff(t2):
+    """``c`` of the inverse left Jacobian of SO(3), a smooth function of ``t2``."""
+    small = t2 < _SERIES_MAX
+    t = jnp.sqrt(jnp.where(small, _SERIES_MAX, t2))
+    half = 0.5 * t
+    big = (1 - half * jnp.cos(half) / jnp.sin(half)) / (t * t)
+    return jnp.where(small, _horner(_C_SERIES, jnp.where(small, t2, 0.0)), big)
+
+
+def _rotate(q, v):
+    """``R(q) v`` for a unit scalar-last ``q``, both of one batch shape."""
+    u, w = q[..., :3], q[..., 3:]
+    t = 2 * cross(u, v)
+    return v + w * t + cross(u, t)
+
+
+def _exp(xi):
+    phi, v = xi[..., :3], xi[..., 3:]
+    a, b = _jacobian_coeffs(jnp.sum(phi * phi, axis=-1, keepdims=True))
+    pv = cross(phi, v)
+    return _rotvec_to_quat(phi), v + a * pv + b * cross(phi, pv)
+
+
+def _log(q, t):
+    phi = _quat_to_rotvec(q)
+    c = _inverse_coeff(jnp.sum(phi * phi, axis=-1, keepdims=True))
+    pt = cross(phi, t)
+    return jnp.concatenate([phi, t - 0.5 * pt + c * cross(phi, pt)], axis=-1)
+
+
+# --- jitted kernels ----------------------------------------------------------------------
+
+
+def _bcast(*arrays):
+    """Broadcast the batch shapes (all but the last axis) explicitly."""
+    shape = np.broadcast_shapes(*(a.shape[:-1] for a in arrays))
+    return tuple(jnp.broadcast_to(a, shape + a.shape[-1:]) for a in arrays)
+
+
+@functools.partial(jax.jit, static_argnames="normalize")
+def _from_matrix(m, normalize):
+    # Rotation part: the nearest rotation (Frobenius norm), as Rotation.from_matrix; a 3x3
+    # block with det <= 0 or a last row other than [0, 0, 0, 1] gives NaN (scipy raises, or
+    # gives NaN for lazy arrays).
+    r = m[..., :3, :3]
+    t = m[..., :3, 3]
+    if not normalize:
+        return matrix_to_quaternion(r), t
+    q = matrix_to_quaternion(r, method="optimal")
+    det = jnp.sum(r[..., 0, :] * cross(r[..., 1, :], r[..., 2, :]), axis=-1)
+    row = m[..., 3, :]
+    ok = (det > 0) & (row[..., 0] == 0) & (row[..., 1] == 0) & (row[..., 2] == 0)
+    ok = (ok & (row[..., 3] == 1))[..., None]
+    return jnp.where(ok, q, jnp.nan), jnp.where(ok, t, jnp.nan)
+
+
+@jax.jit
+def _as_matrix(q, t):
+    # NaN in the quaternion reaches the last row too (zero = 0 * w), as in scipy's matrix.
+    zero = 0 * q[..., 3]
+    top = jnp.concatenate([_to_matrix(q), t[..., None]], axis=-1)
+    bottom = jnp.stack([zero, zero, zero, zero + 1], axis=-1)
+    return jnp.concatenate([top, bottom[..., None, :]], axis=-2)
+
+
+@jax.jit
+def _compose(q1, t1, q2, t2):
+    q1, t1, q2, t2 = _bcast(q1, t1, q2, t2)
+    return _renormalize(_multiply(q1, q2)), t1 + _rotate(q1, t2)
+
+
+@jax.jit
+def _inv(q, t):
+    qc = _conjugate(q)
+    return qc, -_rotate(qc, t)
+
+
+@functools.partial(jax.jit, static_argnames="inverse")
+def _apply(q, t, v, inverse):
+    batch = np.broadcast_shapes(q.shape[:-1], v.shape[:-1])
+    if inverse:
+        q, t = _inv(q, t)
+    if np.prod(q.shape[:-1]) < np.prod(v.shape[:-1]):
+        # Fewer transforms than vectors: each matrix once, then 9 multiply-adds a vector.
+        r = _to_matrix(q)
+        r, t, v = jnp.broadcast_to(r, batch + (3, 3)), *_bcast(t, v)
+        return matvec(r, v) + t
+    q, t, v = _bcast(q, t, v)
+    return _rotate(q, v) + t
+
+
+@jax.jit
+def _from_exp_coords(xi):
+    return _exp(xi)
+
+
+@jax.jit
+def _as_exp_coords(q, t):
+    return _log(q, t)
+
+
+@jax.jit
+def _pow(q, t, n):
+    xi = _log(q, t)
+    return _exp(n[..., None] * xi)
+
+
+def _normalize_dq(real, dual):
+    """scipy's dual-quaternion normalisation: unit real part, dual part orthogonal to it; a
+    zero real part becomes the identity."""
+    n2 = jnp.sum(real * real, axis=-1, keepdims=True)
+    zero = n2 == 0
+    ident = jnp.zeros_like(real).at[..., 3].set(1)
+    real = jnp.where(zero, ident, real)
+    inv = jax.lax.rsqrt(jnp.where(zero, 1.0, n2))  # double where: finite derivatives
+    real, dual = real * inv, dual * inv
+    return real, dual - jnp.sum(real * dual, axis=-1, keepdims=True) * real
+
+
+@functools.partial(jax.jit, static_argnames="scalar_first")
+def _from_dual_quat(dq, scalar_first):
+    real = to_scalar_last(dq[..., :4], scalar_first)
+    dual = to_scalar_last(dq[..., 4:], scalar_first)
+    real, dual = _normalize_dq(real, dual)
+    return real, 2 * _multiply(dual, _conjugate(real))[..., :3]
+
+
+@functools.partial(jax.jit, static_argnames="scalar_first")
+def _as_dual_quat(q, t, scalar_first):
+    tq = jnp.concatenate([t, jnp.zeros_like(t[..., :1])], axis=-1)
+    dual = 0.5 * _multiply(tq, q)
+    if scalar_first:
+        q, dual = jnp.roll(q, 1, axis=-1), jnp.roll(dual, 1, axis=-1)
+    return jnp.concatenate([q, dual], axis=-1)
+
+
+@jax.jit
+def _mean(q, t, w):
+    """Means over the second-to-last axis: ``q`` ``(..., N, 4)``, ``t`` ``(..., N, 3)``,
+    ``w`` ``(..., N)`` or ``None``; a negative weight gives NaN for its set."""
+    if w is None:
+        return quaternion_mean(q), jnp.mean(t, axis=-2)
+    w = jnp.where(w < 0, jnp.nan, w)
+    tm = jnp.sum(w[..., None] * t, axis=-2) / jnp.sum(w, axis=-1)[..., None]
+    return quaternion_mean(q, w), tm
+
+
+@public
+def normalize_dual_quaternion(dual_quat, *, scalar_first: bool = False):
+    """Normalise dual quaternions (scipy's definition).
+
+    A unit dual quaternion ``r + eps d`` has a unit real part ``r`` and a dual part ``d``
+    orthogonal to it. This divides both parts by ``|r|`` and then removes from ``d`` its
+    component along ``r``; a zero real part becomes the identity ``[0, 0, 0, 1]`` (scipy's
+    rule), with the dual part kept.
+
+    Args:
+        dual_quat: ``(..., 8)`` dual quaternions ``[real, dual]``, each part scalar last.
+        scalar_first: each part is ``[w, x, y, z]`` (the result too).
+
+    Returns:
+        ``(..., 8)`` unit dual quaternions, in the input's layout and dtype.
+    """
+    dq = jnp.asarray(dual_quat)
+    if dq.ndim < 1 or dq.shape[-1] != 8:
+        raise ValueError(f"Expected `dual_quat` to have shape (..., 8), got {dq.shape}.")
+    if not jnp.issubdtype(dq.dtype, jnp.floating):
+        dq = dq.astype(float)
+    real = to_scalar_last(dq[..., :4], scalar_first)
+    dual = to_scalar_last(dq[..., 4:], scalar_first)
+    real, dual = _normalize_dq(real, dual)
+    if scalar_first:
+        real, dual = jnp.roll(real, 1, axis=-1), jnp.roll(dual, 1, axis=-1)
+    return jnp.concatenate([real, dual], axis=-1)
+
+
+# --- the class ---------------------------------------------------------------------------
+
+
+def _check_last(x, n, name):
+    if x.ndim < 1 or x.shape[-1] != n:
+        raise ValueError(f"Expected `{name}` to have shape (..., {n}), got {x.shape}.")
+
+
+def _common(*arrays):
+    """The arrays in one float dtype (NumPy's promotion, so float32 meets float64 explicitly
+    even under strict dtype promotion)."""
+    dt = np.result_type(*(a.dtype for a in arrays))
+    return tuple(a.astype(dt) for a in arrays)
+
+
+def _check_index(indexer, n: int):
+    """scipy's IndexError for host indices out of range (JAX clamps them)."""
+    if isinstance(indexer, (int, np.integer)) and not isinstance(indexer, bool):
+        if not -n <= indexer < n:
+            raise IndexError(f"index {indexer} is out of bounds for axis 0 with size {n}")
+        return indexer
+    if isinstance(indexer, (list, np.ndarray)):
+        a = np.asarray(indexer)
+        if a.dtype.kind in "iu" and a.size and (a.min() < -n or a.max() >= n):
+            raise IndexError(f"index out of bounds for axis 0 with size {n}")
+        if a.dtype == bool and a.ndim >= 1 and a.shape[0] != n:
+            raise IndexError(
+                f"boolean index did not match indexed array along axis 0; size of axis is "
+                f"{n} but size of corresponding boolean axis is {a.shape[0]}"
+            )
+        return a
+    if isinstance(indexer, jax.Array) and not isinstance(indexer, jax.core.Tracer) and n == 0:
+        if jnp.issubdtype(indexer.dtype, jnp.integer) and indexer.size:
+            raise IndexError("cannot take from an empty array")
+    return indexer
+
+
+@jax.tree_util.register_pytree_node_class
+class RigidTransform:
+    """Rigid transforms (rotation and translation) in 3 dimensions, scipy's API on JAX arrays.
+
+    ``T v = R v + t``: a rotation ``R`` followed by a translation ``t``; as a matrix
+    ``[[R, t], [0, 1]]`` acting on ``[v, 1]``. ``p * q`` applies ``q`` first.
+
+    A ``RigidTransform`` is a pytree of two leaves, the ``(..., 4)`` unit quaternion of ``R``
+    (scalar last) and the ``(..., 3)`` translation, with no other data: every constructor
+    gives the same tree structure, ``jax.jit`` takes and returns it, ``jax.vmap`` maps over its
+    batch axes, ``lax.scan`` carries it and ``jax.grad`` differentiates through every method.
+    A transform with ``(4,)`` and ``(3,)`` leaves is *single* (no ``len``, no indexing);
+    otherwise ``shape`` is the batch shape. float32 and float64 are kept.
+
+    Exponential coordinates are scipy's ``[rotation vector, v]`` (rotation first):
+    ``exp([phi, v]) = (exp(phi), J(phi) v)`` with ``J`` the left Jacobian of SO(3). Their
+    derivatives are exact at zero rotation and finite up to and at 180 degrees.
+
+    Values scipy rejects (a matrix whose last row is not ``[0, 0, 0, 1]`` or whose rotation
+    block has ``det <= 0``, negative weights) raise ``ValueError`` when they arrive as NumPy
+    arrays, lists or numbers; as JAX arrays, and always under ``jit``, they give NaN for the
+    affected transforms.
+
+    Args:
+        matrix: ``(..., 4, 4)`` homogeneous transformation matrices (as ``from_matrix``).
+        normalize: replace each rotation block by the nearest rotation and check the matrix;
+            ``False`` takes the rotation block as a rotation matrix unchecked.
+        copy: accepted for scipy compatibility (JAX arrays are immutable).
+    """
+
+    __slots__ = ("_quat", "_translation")
+
+    def __init__(self, matrix, normalize: bool = True, copy: bool = True):
+        del copy  # JAX arrays are immutable: there is nothing to copy
+        m = _input(matrix)
+        if m.ndim < 2 or m.shape[-2:] != (4, 4):
+            raise ValueError(f"Expected `matrix` to have shape (..., 4, 4), got {m.shape}.")
+        if normalize and isinstance(m, np.ndarray):
+            bad = np.any(m[..., 3, :] != np.array([0.0, 0.0, 0.0, 1.0]), axis=-1)
+            if np.any(bad):
+                idx = tuple(int(i[0]) for i in np.nonzero(bad)) if bad.ndim else ()
+                raise ValueError(
+                    f"Expected last row of transformation matrix {idx} to be exactly "
+                    f"[0, 0, 0, 1], got {m[idx + (3, Ellipsis)]}"
+                )
+            if m.size and np.any(np.linalg.det(m[..., :3, :3]) <= 0):
+                raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
+        self._quat, self._translation = _from_matrix(m, normalize=bool(normalize))
+
+    @classmethod
+    def _raw(cls, quat, translation) -> RigidTransform:
+        """A transform holding a unit quaternion and a translation as they are (no check)."""
+        tf = object.__new__(cls)
+        tf._quat = quat
+        tf._translation = translation
+        return tf
+
+    # --- pytree --------------------------------------------------------------------------
+
+    def tree_flatten(self):
+        return (self._quat, self._translation), None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls._raw(*children)
+
+    def __getstate__(self):
+        return np.asarray(self._quat), np.asarray(self._translation)
+
+    def __setstate__(self, state):
+        self._quat, self._translation = (jnp.asarray(s) for s in state)
+
+    # --- shape ---------------------------------------------------------------------------
+
+    @property
+    def single(self) -> bool:
+        """Whether this is a single transform (no batch axes)."""
+        return self._quat.ndim == 1
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The batch shape (``()`` for a single transform)."""
+        return tuple(self._quat.shape[:-1])
+
+    @property
+    def rotation(self) -> Rotation:
+        """The rotation part, a ``Rotation`` of shape ``shape``."""
+        return Rotation._raw(self._quat)
+
+    @property
+    def translation(self):
+        """The translation part, ``(..., 3)``."""
+        return self._translation
+
+    def __len__(self) -> int:
+        """Length of the first batch axis. Raises TypeError for a single transform."""
+        if self.single:
+            raise TypeError("Single transform has no len")
+        return self._quat.shape[0]
+
+    def __bool__(self) -> bool:
+        return True
+
+    def __iter__(self):
+        if self.single:
+            raise TypeError("Single transform is not iterable.")
+        return (RigidTransform._raw(self._quat[i], self._translation[i]) for i in range(len(self)))
+
+    def _index(self, indexer):
+        """The index of both leaves: ``indexer`` over the batch axes, all of the last axis."""
+        if self.single:
+            raise TypeError("Single transform is not subscriptable.")
+        if isinstance(indexer, tuple):
+            if any(i is Ellipsis for i in indexer):
+                return indexer + (slice(None),)
+            return indexer + (Ellipsis,)
+        return (_check_index(indexer, self.shape[0]), Ellipsis)
+
+    def __getitem__(self, indexer) -> RigidTransform:
+        """Transforms selected by ``indexer`` over the batch axes (as NumPy indexing)."""
+        idx = self._index(indexer)
+        return RigidTransform._raw(self._quat[idx], self._translation[idx])
+
+    def __setitem__(self, indexer, value: RigidTransform):
+        """Replace the selected transforms by ``value``.
+
+        JAX arrays are immutable: this builds new arrays (``.at[...].set``) and rebinds this
+        object's leaves to them, as ``Rotation.__setitem__`` does. Other references to the old
+        arrays, and pytrees flattened before, keep the old values.
+        """
+        idx = self._index(indexer)
+        if not isinstance(value, RigidTransform):
+            raise TypeError("value must be a RigidTransform object")
+        q, t = self._quat, self._translation
+        self._quat = q.at[idx].set(value._quat.astype(q.dtype))
+        self._translation = t.at[idx].set(value._translation.astype(t.dtype))
+
+    def __repr__(self) -> str:
+        m = repr(np.asarray(self.as_matrix())).splitlines()
+        m[1:] = [" " * 27 + line for line in m[1:]]
+        return "RigidTransform.from_matrix(" + "\n".join(m) + ")"
+
+    # --- constructors --------------------------------------------------------------------
+
+    @staticmethod
+    def from_matrix(matrix) -> RigidTransform:
+        """From ``(..., 4, 4)`` homogeneous transformation matrices ``[[R, t], [0, 1]]``.
+
+        Each rotation block is replaced by the nearest rotation matrix (Frobenius norm, as
+        ``Rotation.from_matrix``). A block with ``det <= 0`` or a last row other than
+        ``[0, 0, 0, 1]`` raises ``ValueError`` for NumPy input and gives NaN for JAX input.
+        """
+        return RigidTransform(matrix)
+
+    @staticmethod
+    def from_rotation(rotation: Rotation) -> RigidTransform:
+        """A pure rotation (zero translation) from a ``Rotation``."""
+        if not isinstance(rotation, Rotation):
+            raise TypeError(
+                f"Expected `rotation` to be a `Rotation` instance, got {type(rotation)}."
+            )
+        q = rotation.as_quat()
+        return RigidTransform._raw(q, jnp.zeros(q.shape[:-1] + (3,), q.dtype))
+
+    @staticmethod
+    def from_translation(translation) -> RigidTransform:
+        """A pure translation from ``(..., 3)`` vectors."""
+        t = _float(translation)
+        _check_last(t, 3, "translation")
+        return RigidTransform._raw(_identity_quat(t.shape[:-1], t.dtype), t)
+
+    @staticmethod
+    def from_components(translation, rotation: Rotation) -> RigidTransform:
+        """Rotation followed by translation: ``T v = rotation.apply(v) + translation``.
+
+        Args:
+            translation: ``(..., 3)`` translations.
+            rotation: a ``Rotation``; its batch shape broadcasts with the translation's.
+        """
+        if not isinstance(rotation, Rotation):
+            raise TypeError(
+                f"Expected `rotation` to be a `Rotation` instance, got {type(rotation)}."
+            )
+        t = _float(translation)
+        _check_last(t, 3, "translation")
+        q, t = _common(rotation.as_quat(), t)
+        try:
+            q, t = _bcast(q, t)
+        except ValueError:
+            raise ValueError(
+                f"Cannot broadcast {rotation.shape} rotations to {t.shape[:-1]} translations."
+            ) from None
+        return RigidTransform._raw(q, t)
+
+    @staticmethod
+    def from_exp_coords(exp_coords) -> RigidTransform:
+        """From exponential coordinates ``[phi, v]``, ``(..., 6)``, rotation vector first.
+
+        ``exp([phi, v])`` is the rotation ``exp(phi)`` with translation ``J(phi) v``, ``J``
+        the left Jacobian of SO(3) (scipy's and Lynch and Park's convention): the transform
+        reached at time 1 by the constant twist ``[phi, v]`` in the body frame.
+        """
+        xi = _input(exp_coords)
+        _check_last(xi, 6, "exp_coords")
+        return RigidTransform._raw(*_from_exp_coords(xi))
+
+    @staticmethod
+    def from_dual_quat(dual_quat, *, scalar_first: bool = False) -> RigidTransform:
+        """From ``(..., 8)`` unit dual quaternions ``[real, dual]``.
+
+        The input is normalised first (see
+        [`normalize_dual_quaternion`][rotjax.normalize_dual_quaternion]): a zero real part
+        is the identity rotation, as in scipy.
+
+        Args:
+            dual_quat: real part (the rotation's quaternion) then dual part, each scalar last.
+            scalar_first: each part is ``[w, x, y, z]``.
+        """
+        dq = _input(dual_quat)
+        _check_last(dq, 8, "dual_quat")
+        return RigidTransform._raw(*_from_dual_quat(dq, scalar_first=bool(scalar_first)))
+
+    @staticmethod
+    def identity(num: int | None = None, *, shape=None, dtype=None) -> RigidTransform:
+        """The identity transform.
+
+        Args:
+            num: number of transforms (``None``: a single one).
+            shape: batch shape, instead of ``num``.
+            dtype: float dtype; JAX's default float if ``None``.
+        """
+        if num is not None and shape is not None:
+            raise ValueError("Only one of `num` and `shape` can be specified.")
+        if num is not None:
+            shape = (num,)
+        elif shape is None:
+            shape = ()
+        elif isinstance(shape, (int, np.integer)):
+            shape = (int(shape),)
+        elif not isinstance(shape, tuple):
+            raise ValueError("`shape` must be an int or a tuple of ints or None.")
+        dt = float if dtype is None else dtype
+        return RigidTransform._raw(_identity_quat(shape, dt), jnp.zeros((*shape, 3), dt))
+
+    @staticmethod
+    def concatenate(transforms) -> RigidTransform:
+        """Concatenate transforms along the first batch axis (single ones count as one)."""
+        if isinstance(transforms, RigidTransform):
+            return RigidTransform._raw(transforms._quat, transforms._translation)
+        transforms = list(transforms)
+        if not all(isinstance(x, RigidTransform) for x in transforms):
+            raise TypeError("input must contain RigidTransform objects only")
+        q = _common(*(jnp.atleast_2d(x._quat) for x in transforms))
+        t = _common(*(jnp.atleast_2d(x._translation) for x in transforms))
+        return RigidTransform._raw(jnp.concatenate(q), jnp.concatenate(t))
+
+    # --- conversions ---------------------------------------------------------------------
+
+    def as_matrix(self):
+        """Homogeneous transformation matrices ``[[R, t], [0, 1]]``, ``(..., 4, 4)``."""
+        return _as_matrix(self._quat, self._translation)
+
+    def as_components(self):
+        """``(translation, rotation)``: ``(..., 3)`` and a ``Rotation``."""
+        return self.translation, self.rotation
+
+    def as_exp_coords(self):
+        """Exponential coordinates ``[phi, v]``, ``(..., 6)``: the rotation vector ``phi``
+        (angle in ``[0, pi]``) and ``v = J(phi)^-1 t``."""
+        return _as_exp_coords(self._quat, self._translation)
+
+    def as_dual_quat(self, *, scalar_first: bool = False):
+        """Unit dual quaternions ``[q, t q / 2]``, ``(..., 8)`` (each part scalar last unless
+        ``scalar_first``); ``q`` is the stored quaternion, of either sign."""
+        return _as_dual_quat(self._quat, self._translation, scalar_first=bool(scalar_first))
+
+    # --- algebra -------------------------------------------------------------------------
+
+    @staticmethod
+    def _operand(other):
+        if isinstance(other, RigidTransform):
+            return other
+        if isinstance(other, Rotation):
+            return RigidTransform.from_rotation(other)
+        return None
+
+    def _compose(self, other: RigidTransform) -> RigidTransform:
+        try:
+            np.broadcast_shapes(self.shape, other.shape)
+        except ValueError:
+            raise ValueError(
+                f"Cannot broadcast {self.shape} transforms in first to {other.shape} "
+                "transforms in second object."
+            ) from None
+        q1, t1, q2, t2 = _common(self._quat, self._translation, other._quat, other._translation)
+        return RigidTransform._raw(*_compose(q1, t1, q2, t2))
+
+    def __mul__(self, other):
+        """Composition ``self * other``: ``other`` applied first; batch shapes broadcast.
+
+        ``other`` may be a ``Rotation`` (a transform with zero translation); so may the left
+        operand (``Rotation * RigidTransform``).
+        """
+        other = self._operand(other)
+        if other is None:
+            return NotImplemented
+        return self._compose(other)
+
+    def __rmul__(self, other):
+        other = self._operand(other)
+        if other is None:
+            return NotImplemented
+        return other._compose(self)
+
+    def __pow__(self, n, modulus=None) -> RigidTransform:
+        """Fractional power ``exp(n log T)``: ``n`` times the screw motion of ``T``.
+
+        ``n`` is a scalar (an array of shape ``()`` or ``(1,)``); ``T ** 0`` is the identity
+        exactly, ``T ** -1`` the inverse to rounding.
+        """
+        if modulus is not None:
+            raise NotImplementedError("modulus not supported")
+        e = jnp.asarray(n)
+        if e.shape == (1,):
+            e = e[0]
+        if e.ndim != 0:
+            raise ValueError("Array exponent must be a scalar")
+        e = jnp.broadcast_to(e.astype(self._quat.dtype), self.shape)
+        return RigidTransform._raw(*_pow(self._quat, self._translation, e))
+
+    def inv(self) -> RigidTransform:
+        """The inverse transforms: ``R^T`` and ``-R^T t``."""
+        return RigidTransform._raw(*_inv(self._quat, self._translation))
+
+    def apply(self, vector, inverse: bool = False):
+        """Transform vectors: ``R v + t`` (``R^T (v - t)`` with ``inverse``).
+
+        Args:
+            vector: ``(..., 3)`` vectors; batch shapes broadcast with the transforms'.
+            inverse: apply the inverse transform.
+
+        Returns:
+            ``(..., 3)`` vectors, in the transform's dtype.
+        """
+        dtype = self._quat.dtype
+        host = _concrete(vector)
+        v = host.astype(dtype) if host is not None else _float(vector, dtype)
+        if v.ndim < 1 or v.shape[-1] != 3:
+            raise ValueError(f"Expected vector to have shape (..., 3), got {v.shape}.")
+        try:
+            np.broadcast_shapes(self.shape, v.shape[:-1])
+        except ValueError:
+            raise ValueError(
+                f"operands could not be broadcast together: {self.shape} transforms and "
+                f"{v.shape[:-1]} vectors"
+            ) from None
+        return _apply(self._quat, self._translation, v, inverse=bool(inverse))
+
+    def mean(self, weights=None, axis=None) -> RigidTransform:
+        """Weighted mean: the mean rotation (as ``Rotation.mean``) and the weighted mean of
+        the translations.
+
+        Args:
+            weights: non-negative weights of shape ``shape``; ``None`` for equal weights.
+            axis: batch axis or axes to reduce; ``None`` for all.
+        """
+        q, t = self._quat, self._translation
+        if self.single:
+            q, t = q[None], t[None]
+        nb = q.ndim - 1
+        if q.shape[0] == 0:
+            raise ValueError("Mean of an empty rotation set is undefined.")
+        if axis is None:
+            axes = tuple(range(nb))
+        elif isinstance(axis, (int, np.integer)):
+            axes = (int(axis),)
+        elif isinstance(axis, tuple):
+            axes = axis
+        else:
+            raise ValueError("`axis` must be None, int, or tuple of ints.")
+        if axes and (min(axes) < -nb or max(axes) > nb - 1):
+            raise ValueError(f"axis {axis} is out of bounds for transform with shape {self.shape}.")
+        axes = tuple(sorted({a % nb for a in axes}))
+        keep = tuple(i for i in range(nb) if i not in axes)
+        out = [q.shape[i] for i in keep]
+        w = None
+        if weights is not None:
+            host = _concrete(weights)
+            if host is not None and np.any(host < 0):
+                raise ValueError("`weights` must be non-negative.")
+            w = _float(weights, q.dtype)
+            if w.shape != self.shape:
+                raise ValueError(
+                    f"Expected `weights` to match transform shape, got shape {w.shape} for "
+                    f"{self.shape} transformations."
+                )
+            w = jnp.reshape(jnp.transpose(jnp.atleast_1d(w), keep + axes), out + [-1])
+        qt = jnp.reshape(jnp.transpose(q, keep + axes + (nb,)), out + [-1, 4])
+        tt = jnp.reshape(jnp.transpose(t, keep + axes + (nb,)), out + [-1, 3])
+        return RigidTransform._raw(*_mean(qt, tt, w))
+
+
+__all__ = ["RigidTransform", "normalize_dual_quaternion"]
