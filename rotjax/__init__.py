@@ -78,6 +78,19 @@ from ._rotvec import quaternion_to_axis_angle as quaternion_to_axis_angle
 from ._rotvec import quaternion_to_rotvec as quaternion_to_rotvec
 from ._rotvec import rotvec_to_matrix as rotvec_to_matrix
 from ._rotvec import rotvec_to_quaternion as rotvec_to_quaternion
+from ._se3 import hat as hat
+from ._se3 import se3_adjoint as se3_adjoint
+from ._se3 import se3_exp as se3_exp
+from ._se3 import se3_left_jacobian as se3_left_jacobian
+from ._se3 import se3_left_jacobian_inverse as se3_left_jacobian_inverse
+from ._se3 import se3_log as se3_log
+from ._se3 import se3_right_jacobian as se3_right_jacobian
+from ._se3 import se3_right_jacobian_inverse as se3_right_jacobian_inverse
+from ._se3 import so3_left_jacobian as so3_left_jacobian
+from ._se3 import so3_left_jacobian_inverse as so3_left_jacobian_inverse
+from ._se3 import so3_right_jacobian as so3_right_jacobian
+from ._se3 import so3_right_jacobian_inverse as so3_right_jacobian_inverse
+from ._se3 import vee as vee
 
 __version__ = "0.1.0"
 
@@ -101,6 +114,7 @@ __all__ = [
     "euler_to_matrix",
     "euler_to_quaternion",
     "geodesic_distance",
+    "hat",
     "integrate_angular_velocity",
     "integrate_angular_velocity_samples",
     "matrix_derivative_to_angular_velocity",
@@ -134,9 +148,21 @@ __all__ = [
     "rotation_group",
     "rotvec_to_matrix",
     "rotvec_to_quaternion",
+    "se3_adjoint",
+    "se3_exp",
+    "se3_left_jacobian",
+    "se3_left_jacobian_inverse",
+    "se3_log",
+    "se3_right_jacobian",
+    "se3_right_jacobian_inverse",
     "sixd_to_matrix",
     "slerp",
+    "so3_left_jacobian",
+    "so3_left_jacobian_inverse",
+    "so3_right_jacobian",
+    "so3_right_jacobian_inverse",
     "unwrap_euler",
     "unwrap_quaternion",
+    "vee",
     "wahba_sensitivity",
 ]
