@@ -9,6 +9,7 @@ dimensions broadcast; float32 and float64 are kept; every function works under `
 gradient policy and guides are in the documentation (``docs/``).
 """
 
+from . import manifold as manifold
 from ._algebra import quaternion_canonical as quaternion_canonical
 from ._algebra import quaternion_power as quaternion_power
 from ._algebra import quaternion_reduce as quaternion_reduce
@@ -117,6 +118,7 @@ __all__ = [
     "hat",
     "integrate_angular_velocity",
     "integrate_angular_velocity_samples",
+    "manifold",
     "matrix_derivative_to_angular_velocity",
     "matrix_to_euler",
     "matrix_to_quaternion",
