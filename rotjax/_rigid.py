@@ -18,61 +18,13 @@ from ._matrix import matrix_to_quaternion
 from ._numerics import cross, matvec, public, to_scalar_last
 from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix
 from ._rotation import Rotation, _concrete, _float, _identity_quat, _input
-from ._rotvec import _exp_coeffs, _quat_to_rotvec, _rotvec_to_quat
+from ._rotvec import _quat_to_rotvec
+from ._se3 import _combo_apply, _inv_coeffs, _so3_coeffs
 
 # --- SE(3) exponential coordinates ------------------------------------------------------
 #
-# exp([phi, v]) = (exp(phi), J(phi) v), J = I + a K + b K^2 with K = hat(phi) the left
-# Jacobian of SO(3); log inverts it with J^-1 = I - K / 2 + c K^2. With t = |phi|:
-#   a = (1 - cos t) / t^2,  b = (t - sin t) / t^3,  c = (1 - (t / 2) cot(t / 2)) / t^2.
-# a = 2 (sin(t/2) / t)^2 has no cancellation. b and c are power series in t^2 below
-# t^2 = 2.25, truncated where the next term is below float64 rounding, and the closed forms
-# above, where their cancellation costs at most a few eps: values and derivatives of every
-# order are exact at 0, and no threshold moves a result by more than rounding.
-
-_SERIES_MAX = 2.25
-# (-1)^k / (2k + 3)!, k = 0..10
-_B_SERIES = tuple((-1) ** k / float(np.prod(np.arange(1.0, 2 * k + 4))) for k in range(11))
-# |B_2n| / (2n)! (Bernoulli numbers), n = 1..12
-_C_SERIES = (
-    0.08333333333333333,
-    0.001388888888888889,
-    3.306878306878307e-05,
-    8.267195767195768e-07,
-    2.08767569878681e-08,
-    5.284190138687493e-10,
-    1.3382536530684679e-11,
-    3.3896802963225827e-13,
-    8.586062056277845e-15,
-    2.174868698558062e-16,
-    5.5090028283602295e-18,
-    1.3954464685812522e-19,
-)
-
-
-def _horner(coeffs, x):
-    acc = jnp.full_like(x, coeffs[-1])
-    for c in coeffs[-2::-1]:
-        acc = acc * x + c
-    return acc
-
-
-def _jacobian_coeffs(t2):
-    """``(a, b)`` of the left Jacobian of SO(3), smooth functions of ``t2 = |phi|^2``."""
-    k, _ = _exp_coeffs(t2)  # sin(t/2) / t
-    small = t2 < _SERIES_MAX
-    t = jnp.sqrt(jnp.where(small, _SERIES_MAX, t2))  # double where: finite derivatives
-    b = jnp.where(small, _horner(_B_SERIES, jnp.where(small, t2, 0.0)), (t - jnp.sin(t)) / t**3)
-    return 2 * k * k, b
-
-
-def _inverse_coeff(t2):
-    """``c`` of the inverse left Jacobian of SO(3), a smooth function of ``t2``."""
-    small = t2 < _SERIES_MAX
-    t = jnp.sqrt(jnp.where(small, _SERIES_MAX, t2))
-    half = 0.5 * t
-    big = (1 - half * jnp.cos(half) / jnp.sin(half)) / (t * t)
-    return jnp.where(small, _horner(_C_SERIES, jnp.where(small, t2, 0.0)), big)
+# exp([phi, v]) = (exp(phi), Jl(phi) v) and its inverse, with the SO(3) left Jacobian and its
+# inverse from rotjax._se3 (applied without forming the matrix), on the quaternion.
 
 
 def _rotate(q, v):
@@ -84,16 +36,15 @@ def _rotate(q, v):
 
 def _exp(xi):
     phi, v = xi[..., :3], xi[..., 3:]
-    a, b = _jacobian_coeffs(jnp.sum(phi * phi, axis=-1, keepdims=True))
-    pv = cross(phi, v)
-    return _rotvec_to_quat(phi), v + a * pv + b * cross(phi, pv)
+    _, k, c, a, b = _so3_coeffs(phi)
+    q = jnp.concatenate([k[..., None] * phi, c[..., None]], axis=-1)  # rotvec_to_quaternion
+    return q, _combo_apply(2 * k * c, a, b, phi, v)
 
 
 def _log(q, t):
     phi = _quat_to_rotvec(q)
-    c = _inverse_coeff(jnp.sum(phi * phi, axis=-1, keepdims=True))
-    pt = cross(phi, t)
-    return jnp.concatenate([phi, t - 0.5 * pt + c * cross(phi, pt)], axis=-1)
+    g, e = _inv_coeffs(phi)
+    return jnp.concatenate([phi, _combo_apply(g, jnp.full_like(g, -0.5), e, phi, t)], axis=-1)
 
 
 # --- jitted kernels ----------------------------------------------------------------------
@@ -112,6 +63,8 @@ def _from_matrix(m, normalize):
     # gives NaN for lazy arrays).
     r = m[..., :3, :3]
     t = m[..., :3, 3]
+    if r.size == 0:  # an empty batch (the eigen kernel cannot reshape one)
+        return jnp.zeros(r.shape[:-2] + (4,), r.dtype), t
     if not normalize:
         return matrix_to_quaternion(r), t
     q = matrix_to_quaternion(r, method="optimal")
@@ -124,8 +77,8 @@ def _from_matrix(m, normalize):
 
 @jax.jit
 def _as_matrix(q, t):
-    # NaN in the quaternion reaches the last row too (zero = 0 * w), as in scipy's matrix.
-    zero = 0 * q[..., 3]
+    # NaN in the quaternion reaches the last row too (0 |w| is +0 or NaN), as in scipy.
+    zero = 0 * jnp.abs(q[..., 3])
     top = jnp.concatenate([_to_matrix(q), t[..., None]], axis=-1)
     bottom = jnp.stack([zero, zero, zero, zero + 1], axis=-1)
     return jnp.concatenate([top, bottom[..., None, :]], axis=-2)
