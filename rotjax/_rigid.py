@@ -344,11 +344,11 @@ class RigidTransform:
         """The index of both leaves: ``indexer`` over the batch axes, all of the last axis."""
         if self.single:
             raise TypeError("Single transform is not subscriptable.")
-        if isinstance(indexer, tuple):
-            if any(i is Ellipsis for i in indexer):
-                return indexer + (slice(None),)
-            return indexer + (Ellipsis,)
-        return (_check_index(indexer, self.shape[0]), Ellipsis)
+        if not isinstance(indexer, tuple):
+            indexer = (_check_index(indexer, self.shape[0]),)
+        if any(i is Ellipsis for i in indexer):
+            return indexer + (slice(None),)
+        return indexer + (Ellipsis,)
 
     def __getitem__(self, indexer) -> RigidTransform:
         """Transforms selected by ``indexer`` over the batch axes (as NumPy indexing)."""
