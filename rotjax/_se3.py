@@ -382,8 +382,11 @@ def se3_left_jacobian(xi):
 
     Returns:
         ``(..., 6, 6)`` ``[[Jl(p), 0], [Q(p, v), Jl(p)]]`` in the same order, with
-        ``Jl(p)`` the SO(3) left Jacobian and ``Q`` Barfoot's coupling block (State Estimation
-        for Robotics, eq. 7.86, with his ``[v, p]`` order swapped).
+        ``Jl(p)`` the SO(3) left Jacobian and ``Q`` the coupling block of Barfoot's *State
+        Estimation for Robotics* (his ``[v, p]`` order swapped): with ``P = hat(p)``,
+        ``V = hat(v)`` and ``t = |p|``, ``Q = V/2 + (t - sin t)/t^3 (PV + VP + PVP)
+        + (t^2 + 2 cos t - 2)/(2 t^4) (PPV + VPP - 3 PVP)
+        + (2t - 3 sin t + t cos t)/(2 t^5) (PVPP + PPVP)``.
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
