@@ -15,7 +15,7 @@ import numpy as np
 
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
-from ._numerics import cross, matvec, public, to_scalar_last
+from ._numerics import cross, matvec, max_abs, public, to_scalar_last, unit_scale
 from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix
 from ._rotation import Rotation, _concrete, _float, _identity_quat, _input
 from ._rotvec import _quat_to_rotvec
@@ -129,11 +129,16 @@ def _pow(q, t, n):
 def _normalize_dq(real, dual):
     """scipy's dual-quaternion normalisation: unit real part, dual part orthogonal to it; a
     zero real part becomes the identity."""
+    # Both parts scaled by one exact power of two first, so |real|^2 cannot overflow or
+    # underflow (the result does not depend on that factor).
+    big = max_abs(*jnp.moveaxis(real, -1, 0))
+    zero = (big == 0)[..., None]
+    scale = jnp.where(zero, jnp.ones_like(real[..., :1]), unit_scale(big)[..., None])
+    real, dual = real * scale, dual * scale
     n2 = jnp.sum(real * real, axis=-1, keepdims=True)
-    zero = n2 == 0
     ident = jnp.zeros_like(real).at[..., 3].set(1)
     real = jnp.where(zero, ident, real)
-    inv = jax.lax.rsqrt(jnp.where(zero, 1.0, n2))  # double where: finite derivatives
+    inv = jax.lax.rsqrt(jnp.where(zero, jnp.ones_like(n2), n2))  # double where
     real, dual = real * inv, dual * inv
     return real, dual - jnp.sum(real * dual, axis=-1, keepdims=True) * real
 
