@@ -180,9 +180,18 @@ def test_grad_finite_at_the_identity_and_at_180_degrees(dtype):
     assert all(np.all(np.isfinite(leaf)) for leaf in jax.tree.leaves(h))
 
 
-def test_optax_fits_a_pose_on_the_group():
-    """Adam updates the tangents and rplus applies them: the fitted pose of a noiseless point
-    cloud is the true one."""
+@pytest.mark.parametrize(
+    ("make", "steps", "tol"),
+    [
+        (lambda: optax.sgd(0.4), 200, 1e-12),
+        (lambda: optax.adam(optax.cosine_decay_schedule(0.1, 400, alpha=1e-9)), 400, 1e-6),
+    ],
+    ids=["sgd", "adam"],
+)
+def test_optax_fits_a_pose_on_the_group(make, steps, tol):
+    """An optax optimiser updates the tangents and rplus applies them: the fitted pose of a
+    noiseless point cloud is the true one (gradient descent converges linearly, to rounding;
+    Adam to its last step size)."""
     rng = np.random.default_rng(7)
     true = SRigid.from_exp_coords(np.array([1.0, -2.0, 0.5, 0.3, 4.0, -1.0]))
     pts = rng.normal(size=(50, 3))
@@ -191,20 +200,24 @@ def test_optax_fits_a_pose_on_the_group():
     def loss(T):
         return jnp.mean(jnp.sum((T.apply(pts) - obs) ** 2, axis=-1))
 
-    opt = optax.adam(optax.exponential_decay(0.1, 100, 0.5))
-    T = rj.RigidTransform.identity()
+    opt = make()
+    T = rj.RigidTransform.identity(dtype=np.float64)
     state = opt.init(manifold.zero_tangents(T))
 
-    @jax.jit
     def step(carry, _):
         T, state = carry
         g = manifold.grad(loss)(T)
         updates, state = opt.update(g, state)
         return (manifold.rplus(T, updates), state), loss(T)
 
-    (T, state), losses = jax.lax.scan(step, (T, state), None, length=1500)
-    assert losses[-1] < 1e-20 and losses[0] > 10
-    assert_close(T.as_matrix(), true.as_matrix(), atol=1e-10)
+    # optax's schedules and bias corrections mix its int32 step count with floats, which the
+    # test suite's strict promotion rejects (rotjax's code is checked strict everywhere else).
+    with jax.numpy_dtype_promotion("standard"):
+        (T, state), losses = jax.jit(lambda c: jax.lax.scan(step, c, None, length=steps))(
+            (T, state)
+        )
+    assert losses[0] > 10 and losses[-1] < 1e-3 * tol
+    assert_close(T.as_matrix(), true.as_matrix(), atol=tol)
 
 
 def test_rigid_transform_optional_at_import():
