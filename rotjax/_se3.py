@@ -1,12 +1,12 @@
 """Lie calculus of SO(3) and SE(3): hat and vee, the Jacobians of the exponential map, and the
 exponential, logarithm and adjoint of rigid transforms.
 
-Tangent vectors of SE(3) are scipy's exponential coordinates ``xi = [rotvec, v]`` (rotation
-first); transforms are ``(..., 4, 4)`` homogeneous matrices ``[[R, t], [0, 1]]`` acting on column
+Tangent vectors of SE(3) are scipy's exponential coordinates `xi = [rotvec, v]` (rotation
+first); transforms are `(..., 4, 4)` homogeneous matrices `[[R, t], [0, 1]]` acting on column
 vectors. Every coefficient that is a ratio of vanishing quantities at the zero rotation
-(``(t - sin t) / t^3`` and its kind) is a power series in ``t^2`` below ``t^2 = 1``, summed to
+(`(t - sin t) / t^3` and its kind) is a power series in `t^2` below `t^2 = 1`, summed to
 rounding for the dtype, and the closed form above it, where its cancellation costs at most a
-few ulps: values and derivatives of every order are finite and accurate at 0, at ``1e-300`` and
+few ulps: values and derivatives of every order are finite and accurate at 0, at `1e-300` and
 up to pi.
 """
 
@@ -16,6 +16,8 @@ import math
 from fractions import Fraction
 
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from . import _numerics as nm
 from ._matrix import _from_matrix
@@ -157,17 +159,32 @@ def _q_matrix(p, r):
 
 
 @public
-def hat(v):
-    """The matrix of a tangent vector: ``so(3)`` for 3-vectors, ``se(3)`` for 6-vectors.
+def hat(v: ArrayLike) -> Array:
+    """The matrix of a tangent vector: `so(3)` for 3-vectors, `se(3)` for 6-vectors.
 
     Args:
-        v: ``(..., 3)`` vector ``w``, or ``(..., 6)`` exponential coordinates ``[w, v]``
-            (rotation first).
+        v: `(..., 3)` vector `w`, or `(..., 6)` exponential coordinates `[w, v]` (rotation
+            first).
 
     Returns:
-        ``(..., 3, 3)`` skew-symmetric ``[w]x`` with ``hat(w) @ u == cross(w, u)``, or
-        ``(..., 4, 4)`` twist ``[[hat(w), v], [0, 0]]``, whose matrix exponential is
-        [`se3_exp`][rotjax.se3_exp].
+        `(..., 3, 3)` skew-symmetric `[w]x` with `hat(w) @ u == cross(w, u)`, or `(..., 4, 4)`
+            twist `[[hat(w), v], [0, 0]]`, whose matrix exponential is
+            [`se3_exp`][rotjax.se3_exp].
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.hat([1.0, 2.0, 3.0]))
+        # [[ 0. -3.  2.]
+        #  [ 3.  0. -1.]
+        #  [-2.  1.  0.]]
+        print(rj.hat([0.0, 0.0, 1.0, 4.0, 5.0, 6.0]))
+        # [[ 0. -1.  0.  4.]
+        #  [ 1.  0. -0.  5.]
+        #  [-0.  0.  0.  6.]
+        #  [ 0.  0.  0.  0.]]
+        ```
     """
     (v,), dt = as_float(v)
     if v.ndim < 1 or v.shape[-1] not in (3, 6):
@@ -180,16 +197,26 @@ def hat(v):
 
 
 @public
-def vee(M):
-    """Inverse of [`hat`][rotjax.hat]: the vector of an ``so(3)`` or ``se(3)`` matrix.
+def vee(M: ArrayLike) -> Array:
+    """Inverse of [`hat`][rotjax.hat]: the vector of an `so(3)` or `se(3)` matrix.
 
     Args:
-        M: ``(..., 3, 3)`` matrix, or ``(..., 4, 4)`` twist ``[[W, v], [*, *]]``.
+        M: `(..., 3, 3)` matrix, or `(..., 4, 4)` twist `[[W, v], [*, *]]`.
 
     Returns:
-        ``(..., 3)`` vector of the antisymmetric part, ``(M - M^T) / 2`` (so ``vee(hat(w)) ==
-        w`` and a symmetric part is ignored), or ``(..., 6)`` ``[vee(W), v]``; the bottom row of
-        a 4x4 matrix is not read.
+        `(..., 3)` vector of the antisymmetric part, `(M - M^T) / 2` (so `vee(hat(w)) == w`
+            and a symmetric part is ignored), or `(..., 6)` `[vee(W), v]`; the bottom row of a
+            4x4 matrix is not read.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.vee(rj.hat([1.0, 2.0, 3.0])))
+        # [1. 2. 3.]
+        print(rj.vee(rj.hat([0.0, 0.0, 1.0, 4.0, 5.0, 6.0])))
+        # [0. 0. 1. 4. 5. 6.]
+        ```
     """
     (M,), dt = as_float(M)
     if M.ndim < 2 or M.shape[-2:] not in ((3, 3), (4, 4)):
@@ -201,17 +228,28 @@ def vee(M):
 
 
 @public
-def so3_left_jacobian(rotvec):
-    """Left Jacobian of the SO(3) exponential: ``exp(p + d) = exp(Jl(p) d) exp(p)`` to first
-    order in ``d``.
+def so3_left_jacobian(rotvec: ArrayLike) -> Array:
+    """Left Jacobian of the SO(3) exponential: `exp(p + d) = exp(Jl(p) d) exp(p)` to first order
+    in `d`.
 
     Args:
-        rotvec: ``(..., 3)`` rotation vector ``p`` (any angle).
+        rotvec: `(..., 3)` rotation vector `p` (any angle).
 
     Returns:
-        ``(..., 3, 3)`` ``Jl = I + (1 - cos t)/t^2 P + (t - sin t)/t^3 P^2``, ``P = hat(p)``,
-        ``t = |p|``. It is also the matrix ``V`` that maps ``v`` to the translation in
-        [`se3_exp`][rotjax.se3_exp], and ``Jl(p) = R(p) Jr(p)``.
+        `(..., 3, 3)` `Jl = I + (1 - cos t)/t^2 P + (t - sin t)/t^3 P^2`, `P = hat(p)`,
+            `t = |p|`. It is also the matrix `V` that maps `v` to the translation in
+            [`se3_exp`][rotjax.se3_exp], and `Jl(p) = R(p) Jr(p)`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        print(rj.so3_left_jacobian([0.0, 0.0, jnp.pi / 2]).round(3))
+        # [[ 0.637 -0.637  0.   ]
+        #  [ 0.637  0.637  0.   ]
+        #  [ 0.     0.     1.   ]]
+        ```
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
@@ -219,16 +257,30 @@ def so3_left_jacobian(rotvec):
 
 
 @public
-def so3_right_jacobian(rotvec):
-    """Right Jacobian of the SO(3) exponential: ``exp(p + d) = exp(p) exp(Jr(p) d)`` to first
-    order in ``d``.
+def so3_right_jacobian(rotvec: ArrayLike) -> Array:
+    """Right Jacobian of the SO(3) exponential: `exp(p + d) = exp(p) exp(Jr(p) d)` to first order
+    in `d`.
 
     Args:
-        rotvec: ``(..., 3)`` rotation vector ``p`` (any angle).
+        rotvec: `(..., 3)` rotation vector `p` (any angle).
 
     Returns:
-        ``(..., 3, 3)`` ``Jr = Jl(-p) = Jl(p)^T = I - (1 - cos t)/t^2 P + (t - sin t)/t^3 P^2``.
-        In the body frame, the angular velocity of ``exp(p(s))`` is ``Jr(p) dp/ds``.
+        `(..., 3, 3)` `Jr = Jl(-p) = Jl(p)^T = I - (1 - cos t)/t^2 P + (t - sin t)/t^3 P^2`.
+            In the body frame, the angular velocity of `exp(p(s))` is `Jr(p) dp/ds`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        p = jnp.array([0.0, 0.0, jnp.pi / 2])
+        print(rj.so3_right_jacobian(p).round(3))
+        # [[ 0.637  0.637  0.   ]
+        #  [-0.637  0.637  0.   ]
+        #  [ 0.     0.     1.   ]]
+        print(jnp.allclose(rj.so3_right_jacobian(p), rj.so3_left_jacobian(p).T))
+        # True
+        ```
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
@@ -237,16 +289,27 @@ def so3_right_jacobian(rotvec):
 
 
 @public
-def so3_left_jacobian_inverse(rotvec):
+def so3_left_jacobian_inverse(rotvec: ArrayLike) -> Array:
     """Inverse of [`so3_left_jacobian`][rotjax.so3_left_jacobian].
 
     Args:
-        rotvec: ``(..., 3)`` rotation vector ``p``; the inverse exists for angles other than
-            non-zero multiples of 2 pi (the logarithm's angles, ``[0, pi]``, are all fine).
+        rotvec: `(..., 3)` rotation vector `p`; the inverse exists for angles other than
+            non-zero multiples of 2 pi (the logarithm's angles, `[0, pi]`, are all fine).
 
     Returns:
-        ``(..., 3, 3)`` ``Jl^-1 = I - P/2 + (1 - (t/2) cot(t/2))/t^2 P^2``: the derivative of
-        ``log(exp(d) exp(p))`` in ``d`` at 0.
+        `(..., 3, 3)` `Jl^-1 = I - P/2 + (1 - (t/2) cot(t/2))/t^2 P^2`: the derivative of
+            `log(exp(d) exp(p))` in `d` at 0.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        p = jnp.array([0.3, -0.2, 1.0])
+        J = rj.so3_left_jacobian(p)
+        print(jnp.allclose(rj.so3_left_jacobian_inverse(p) @ J, jnp.eye(3), atol=1e-6))
+        # True
+        ```
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
@@ -255,15 +318,26 @@ def so3_left_jacobian_inverse(rotvec):
 
 
 @public
-def so3_right_jacobian_inverse(rotvec):
+def so3_right_jacobian_inverse(rotvec: ArrayLike) -> Array:
     """Inverse of [`so3_right_jacobian`][rotjax.so3_right_jacobian].
 
     Args:
-        rotvec: ``(..., 3)`` rotation vector ``p`` (angle not a non-zero multiple of 2 pi).
+        rotvec: `(..., 3)` rotation vector `p` (angle not a non-zero multiple of 2 pi).
 
     Returns:
-        ``(..., 3, 3)`` ``Jr^-1 = I + P/2 + (1 - (t/2) cot(t/2))/t^2 P^2``: the derivative of
-        ``log(exp(p) exp(d))`` in ``d`` at 0.
+        `(..., 3, 3)` `Jr^-1 = I + P/2 + (1 - (t/2) cot(t/2))/t^2 P^2`: the derivative of
+            `log(exp(p) exp(d))` in `d` at 0.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        p = jnp.array([0.3, -0.2, 1.0])
+        J = rj.so3_right_jacobian(p)
+        print(jnp.allclose(rj.so3_right_jacobian_inverse(p) @ J, jnp.eye(3), atol=1e-6))
+        # True
+        ```
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
@@ -287,21 +361,35 @@ def _homogeneous(R, t):
 
 
 @public
-def se3_exp(xi):
+def se3_exp(xi: ArrayLike) -> Array:
     """Exponential map of SE(3): exponential coordinates to a 4x4 rigid transform.
 
     Args:
-        xi: ``(..., 6)`` exponential coordinates ``[p, v]``, scipy's order (rotation vector
-            first), so that ``se3_exp(xi)`` is ``RigidTransform.from_exp_coords(xi).as_matrix()``
-            and the matrix exponential of ``hat(xi)``.
+        xi: `(..., 6)` exponential coordinates `[p, v]`, scipy's order (rotation vector
+            first), so that `se3_exp(xi)` is `RigidTransform.from_exp_coords(xi).as_matrix()`
+            and the matrix exponential of `hat(xi)`.
 
     Returns:
-        ``(..., 4, 4)`` ``[[R, t], [0, 1]]`` with ``R = exp(hat(p))`` and ``t = Jl(p) v``
-        ([`so3_left_jacobian`][rotjax.so3_left_jacobian]).
+        `(..., 4, 4)` `[[R, t], [0, 1]]` with `R = exp(hat(p))` and `t = Jl(p) v`
+            ([`so3_left_jacobian`][rotjax.so3_left_jacobian]).
 
     Note:
-        Exact derivatives of every order at ``p = 0`` (the coefficients are series in
-        ``|p|^2`` there, see the module notes).
+        Exact derivatives of every order at `p = 0` (the coefficients are series in `|p|^2`
+        there, see the module notes).
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        # a quarter turn about z while moving 1 along x: a screw motion
+        T = rj.se3_exp(jnp.array([0.0, 0.0, jnp.pi / 2, 1.0, 0.0, 0.0]))
+        print(T.round(3))
+        # [[-0.    -1.     0.     0.637]
+        #  [ 1.    -0.     0.     0.637]
+        #  [ 0.     0.     1.     0.   ]
+        #  [ 0.     0.     0.     1.   ]]
+        ```
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
@@ -332,22 +420,32 @@ def _log(R, t):
 
 
 @public
-def se3_log(T):
+def se3_log(T: ArrayLike) -> Array:
     """Logarithm map of SE(3): a 4x4 rigid transform to its exponential coordinates.
 
     Args:
-        T: ``(..., 4, 4)`` homogeneous transform ``[[R, t], [0, 1]]`` (the bottom row is not
+        T: `(..., 4, 4)` homogeneous transform `[[R, t], [0, 1]]` (the bottom row is not
             read).
 
     Returns:
-        ``(..., 6)`` ``[p, v]`` with ``p`` the rotation vector of ``R`` (angle in ``[0, pi]``) and
-        ``v = Jl(p)^-1 t``, so that ``se3_exp(se3_log(T)) == T`` to rounding, at and near 180
-        degrees too.
+        `(..., 6)` `[p, v]` with `p` the rotation vector of `R` (angle in `[0, pi]`) and
+            `v = Jl(p)^-1 t`, so that `se3_exp(se3_log(T)) == T` to rounding, at and near 180
+            degrees too.
 
     Note:
-        ``p`` is [`matrix_to_rotvec`][rotjax.matrix_to_rotvec]'s (through the quaternion, exact
+        `p` is [`matrix_to_rotvec`][rotjax.matrix_to_rotvec]'s (through the quaternion, exact
         near 180 degrees); the derivatives are finite everywhere and exact at the identity. At
-        exactly 180 degrees the log jumps between ``p`` and ``-p`` (the cut of the map).
+        exactly 180 degrees the log jumps between `p` and `-p` (the cut of the map).
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        xi = jnp.array([0.0, 0.0, jnp.pi / 2, 1.0, 0.0, 0.0])
+        print(rj.se3_log(rj.se3_exp(xi)).round(6))
+        # [ 0.        0.        1.570796  1.       -0.        0.      ]
+        ```
     """
     (T,), dt = as_float(T)
     check_shape(T, (4, 4), "T")
@@ -355,16 +453,28 @@ def se3_log(T):
 
 
 @public
-def se3_adjoint(T):
-    """Adjoint matrix of a rigid transform, in the ``[rotation, translation]`` order.
+def se3_adjoint(T: ArrayLike) -> Array:
+    """Adjoint matrix of a rigid transform, in the `[rotation, translation]` order.
 
     Args:
-        T: ``(..., 4, 4)`` homogeneous transform ``[[R, t], [0, 1]]``.
+        T: `(..., 4, 4)` homogeneous transform `[[R, t], [0, 1]]`.
 
     Returns:
-        ``(..., 6, 6)`` ``Ad_T = [[R, 0], [hat(t) R, R]]``, with
-        ``se3_exp(Ad_T @ xi) == T @ se3_exp(xi) @ inv(T)``. A covariance ``S`` of a right
-        perturbation ``T exp(d)`` is ``Ad_T S Ad_T^T`` as a left one, ``exp(d') T``.
+        `(..., 6, 6)` `Ad_T = [[R, 0], [hat(t) R, R]]`, with
+            `se3_exp(Ad_T @ xi) == T @ se3_exp(xi) @ inv(T)`. A covariance `S` of a right
+            perturbation `T exp(d)` is `Ad_T S Ad_T^T` as a left one, `exp(d') T`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        T = rj.se3_exp(jnp.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0]))
+        xi = jnp.array([0.3, -0.1, 0.2, 0.5, 0.0, -0.4])
+        lhs = rj.se3_exp(rj.se3_adjoint(T) @ xi)
+        print(jnp.allclose(lhs, T @ rj.se3_exp(xi) @ jnp.linalg.inv(T), atol=1e-5))
+        # True
+        ```
     """
     (T,), dt = as_float(T)
     check_shape(T, (4, 4), "T")
@@ -373,20 +483,33 @@ def se3_adjoint(T):
 
 
 @public
-def se3_left_jacobian(xi):
-    """Left Jacobian of the SE(3) exponential: ``exp(xi + d) = exp(Jl(xi) d) exp(xi)`` to first
-    order in ``d``.
+def se3_left_jacobian(xi: ArrayLike) -> Array:
+    """Left Jacobian of the SE(3) exponential: `exp(xi + d) = exp(Jl(xi) d) exp(xi)` to first
+    order in `d`.
 
     Args:
-        xi: ``(..., 6)`` exponential coordinates ``[p, v]`` (rotation first).
+        xi: `(..., 6)` exponential coordinates `[p, v]` (rotation first).
 
     Returns:
-        ``(..., 6, 6)`` ``[[Jl(p), 0], [Q(p, v), Jl(p)]]`` in the same order, with
-        ``Jl(p)`` the SO(3) left Jacobian and ``Q`` the coupling block of Barfoot's *State
-        Estimation for Robotics* (his ``[v, p]`` order swapped): with ``P = hat(p)``,
-        ``V = hat(v)`` and ``t = |p|``, ``Q = V/2 + (t - sin t)/t^3 (PV + VP + PVP)
-        + (t^2 + 2 cos t - 2)/(2 t^4) (PPV + VPP - 3 PVP)
-        + (2t - 3 sin t + t cos t)/(2 t^5) (PVPP + PPVP)``.
+        `(..., 6, 6)` `[[Jl(p), 0], [Q(p, v), Jl(p)]]` in the same order, with `Jl(p)` the
+            SO(3) left Jacobian and `Q` the coupling block of Barfoot's *State Estimation for
+            Robotics* (his `[v, p]` order swapped): with `P = hat(p)`, `V = hat(v)` and
+            `t = |p|`, `Q = V/2 + (t - sin t)/t^3 (PV + VP + PVP)
+            + (t^2 + 2 cos t - 2)/(2 t^4) (PPV + VPP - 3 PVP)
+            + (2t - 3 sin t + t cos t)/(2 t^5) (PVPP + PPVP)`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        # at zero rotation: [[I, 0], [hat(v) / 2, I]]
+        J = rj.se3_left_jacobian(jnp.array([0.0, 0.0, 0.0, 2.0, 0.0, 0.0]))
+        print(J[3:, :3])
+        # [[ 0.  0.  0.]
+        #  [ 0.  0. -1.]
+        #  [ 0.  1.  0.]]
+        ```
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
@@ -396,15 +519,25 @@ def se3_left_jacobian(xi):
 
 
 @public
-def se3_right_jacobian(xi):
-    """Right Jacobian of the SE(3) exponential: ``exp(xi + d) = exp(xi) exp(Jr(xi) d)`` to
-    first order in ``d``.
+def se3_right_jacobian(xi: ArrayLike) -> Array:
+    """Right Jacobian of the SE(3) exponential: `exp(xi + d) = exp(xi) exp(Jr(xi) d)` to first
+    order in `d`.
 
     Args:
-        xi: ``(..., 6)`` exponential coordinates ``[p, v]`` (rotation first).
+        xi: `(..., 6)` exponential coordinates `[p, v]` (rotation first).
 
     Returns:
-        ``(..., 6, 6)`` ``Jr(xi) = Jl(-xi)``.
+        `(..., 6, 6)` `Jr(xi) = Jl(-xi)`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        xi = jnp.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0])
+        print(jnp.allclose(rj.se3_right_jacobian(xi), rj.se3_left_jacobian(-xi)))
+        # True
+        ```
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
@@ -420,16 +553,27 @@ def _left_inverse(p, r):
 
 
 @public
-def se3_left_jacobian_inverse(xi):
+def se3_left_jacobian_inverse(xi: ArrayLike) -> Array:
     """Inverse of [`se3_left_jacobian`][rotjax.se3_left_jacobian]: the derivative of
-    ``log(exp(d) exp(xi))`` in ``d`` at 0.
+    `log(exp(d) exp(xi))` in `d` at 0.
 
     Args:
-        xi: ``(..., 6)`` exponential coordinates ``[p, v]``; rotation angle not a non-zero
+        xi: `(..., 6)` exponential coordinates `[p, v]`; rotation angle not a non-zero
             multiple of 2 pi.
 
     Returns:
-        ``(..., 6, 6)`` ``[[Jl^-1, 0], [-Jl^-1 Q Jl^-1, Jl^-1]]``.
+        `(..., 6, 6)` `[[Jl^-1, 0], [-Jl^-1 Q Jl^-1, Jl^-1]]`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        xi = jnp.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0])
+        J, Ji = rj.se3_left_jacobian(xi), rj.se3_left_jacobian_inverse(xi)
+        print(jnp.allclose(Ji @ J, jnp.eye(6), atol=1e-5))
+        # True
+        ```
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
@@ -437,16 +581,27 @@ def se3_left_jacobian_inverse(xi):
 
 
 @public
-def se3_right_jacobian_inverse(xi):
+def se3_right_jacobian_inverse(xi: ArrayLike) -> Array:
     """Inverse of [`se3_right_jacobian`][rotjax.se3_right_jacobian]: the derivative of
-    ``log(exp(xi) exp(d))`` in ``d`` at 0.
+    `log(exp(xi) exp(d))` in `d` at 0.
 
     Args:
-        xi: ``(..., 6)`` exponential coordinates ``[p, v]``; rotation angle not a non-zero
+        xi: `(..., 6)` exponential coordinates `[p, v]`; rotation angle not a non-zero
             multiple of 2 pi.
 
     Returns:
-        ``(..., 6, 6)`` ``Jr(xi)^-1 = Jl(-xi)^-1``.
+        `(..., 6, 6)` `Jr(xi)^-1 = Jl(-xi)^-1`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        xi = jnp.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0])
+        J, Ji = rj.se3_right_jacobian(xi), rj.se3_right_jacobian_inverse(xi)
+        print(jnp.allclose(Ji @ J, jnp.eye(6), atol=1e-5))
+        # True
+        ```
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
