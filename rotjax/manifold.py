@@ -3,23 +3,28 @@ transforms inside any pytree.
 
 A pytree of parameters may hold [`Rotation`][rotjax.Rotation] and
 [`RigidTransform`][rotjax.RigidTransform] objects next to ordinary arrays. Each group element
-``x`` gets a tangent vector ``d`` in its body frame, with
+`x` gets a tangent vector `d` in its body frame, with
 
-* ``rplus(x, d) = x * exp(d)``: ``Rotation.from_rotvec(d)`` (``d`` of shape ``(*x.shape, 3)``)
-  or ``RigidTransform.from_exp_coords(d)`` (``(*x.shape, 6)``, ``[rotvec, v]``);
-* ``rminus(a, b) = log(a^-1 * b)``, so that ``rplus(a, rminus(a, b)) == b``;
+* `rplus(x, d) = x * exp(d)`: `Rotation.from_rotvec(d)` (`d` of shape `(*x.shape, 3)`)
+  or `RigidTransform.from_exp_coords(d)` (`(*x.shape, 6)`, `[rotvec, v]`);
+* `rminus(a, b) = log(a^-1 * b)`, so that `rplus(a, rminus(a, b)) == b`;
 
-and every other leaf is Euclidean (``x + d`` and ``b - a``). [`grad`][rotjax.manifold.grad]
-returns the derivative of ``f(rplus(x, d))`` in ``d`` at ``d = 0``: a pytree shaped like
+and every other leaf is Euclidean (`x + d` and `b - a`). [`grad`][rotjax.manifold.grad]
+returns the derivative of `f(rplus(x, d))` in `d` at `d = 0`: a pytree shaped like
 [`zero_tangents`][rotjax.manifold.zero_tangents], which any optimiser on arrays (optax's,
-for one) can update, and [`rplus`][rotjax.manifold.rplus] applies::
+for one) can update, and [`rplus`][rotjax.manifold.rplus] applies:
 
-    tangents = manifold.grad(loss)(params)
-    updates, state = optimizer.update(tangents, state)
-    params = manifold.rplus(params, updates)
+```python
+tangents = manifold.grad(loss)(params)
+updates, state = optimizer.update(tangents, state)
+params = manifold.rplus(params, updates)
+```
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -53,16 +58,29 @@ def _map(fun, tree, *rest):
     return jax.tree.map(fun, tree, *rest, is_leaf=_is_group)
 
 
-def zero_tangents(x):
-    """Zero tangent vectors for every element of the pytree ``x``.
+def zero_tangents(x: Any) -> Any:
+    """Zero tangent vectors for every element of the pytree `x`.
 
     Args:
-        x: a pytree whose leaves are ``Rotation``, ``RigidTransform`` or arrays.
+        x: a pytree whose leaves are [`Rotation`][rotjax.Rotation],
+            [`RigidTransform`][rotjax.RigidTransform] or arrays.
 
     Returns:
-        The same structure with ``zeros((*leaf.shape, 3))`` for a ``Rotation``,
-        ``zeros((*leaf.shape, 6))`` for a ``RigidTransform`` (in their dtype) and
-        ``zeros_like(leaf)`` for an array.
+        The same structure with `zeros((*leaf.shape, 3))` for a `Rotation`,
+            `zeros((*leaf.shape, 6))` for a `RigidTransform` (in their dtype) and
+            `zeros_like(leaf)` for an array.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+        from rotjax import manifold
+
+        params = {"pose": rj.RigidTransform.identity(), "R": rj.Rotation.identity(2),
+                  "s": jnp.ones(4)}
+        print({k: v.shape for k, v in manifold.zero_tangents(params).items()})
+        # {'R': (2, 3), 'pose': (6,), 's': (4,)}
+        ```
     """
 
     def zero(leaf):
@@ -73,18 +91,31 @@ def zero_tangents(x):
     return _map(zero, x)
 
 
-def rplus(x, delta):
-    """Right perturbation ``x (+) delta = x * exp(delta)``, leaf by leaf.
+def rplus(x: Any, delta: Any) -> Any:
+    """Right perturbation `x (+) delta = x * exp(delta)`, leaf by leaf.
 
     Args:
-        x: a pytree whose leaves are ``Rotation``, ``RigidTransform`` or arrays.
-        delta: tangent vectors shaped like ``zero_tangents(x)``: rotation vectors for a
-            ``Rotation``, exponential coordinates ``[rotvec, v]`` for a ``RigidTransform``
-            (both in the element's own frame), and increments for arrays.
+        x: a pytree whose leaves are [`Rotation`][rotjax.Rotation],
+            [`RigidTransform`][rotjax.RigidTransform] or arrays.
+        delta: tangent vectors shaped like `zero_tangents(x)`: `(*x.shape, 3)` rotation vectors
+            for a `Rotation`, `(*x.shape, 6)` exponential coordinates `[rotvec, v]` for a
+            `RigidTransform` (both in the element's own frame), and increments for arrays.
 
     Returns:
-        A pytree like ``x``: ``x * Rotation.from_rotvec(d)``,
-        ``x * RigidTransform.from_exp_coords(d)``, or ``x + d``.
+        A pytree like `x`: `x * Rotation.from_rotvec(d)`,
+            `x * RigidTransform.from_exp_coords(d)`, or `x + d`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+        from rotjax import manifold
+
+        R = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, 0.5]))
+        R2 = manifold.rplus(R, jnp.array([0.0, 0.0, 0.25]))
+        print(round(float(R2.as_rotvec()[2]), 3))  # about z by 0.5 + 0.25
+        # 0.75
+        ```
     """
 
     def plus(leaf, d):
@@ -97,17 +128,30 @@ def rplus(x, delta):
     return _map(plus, x, delta)
 
 
-def rminus(a, b):
-    """Right difference ``log(a^-1 * b)``, leaf by leaf: the tangent that takes ``a`` to ``b``.
+def rminus(a: Any, b: Any) -> Any:
+    """Right difference `log(a^-1 * b)`, leaf by leaf: the tangent that takes `a` to `b`.
 
     Args:
-        a: a pytree whose leaves are ``Rotation``, ``RigidTransform`` or arrays.
+        a: a pytree whose leaves are [`Rotation`][rotjax.Rotation],
+            [`RigidTransform`][rotjax.RigidTransform] or arrays.
         b: a pytree of the same structure.
 
     Returns:
-        Tangents shaped like ``zero_tangents(a)`` with ``rplus(a, rminus(a, b)) == b``: the
-        rotation vector of ``a.inv() * b`` (angle in ``[0, pi]``), the exponential coordinates
-        of ``a.inv() * b``, or ``b - a``.
+        Tangents shaped like `zero_tangents(a)` with `rplus(a, rminus(a, b)) == b`: the
+            rotation vector of `a.inv() * b` (angle in `[0, pi]`), the exponential coordinates
+            of `a.inv() * b`, or `b - a`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+        from rotjax import manifold
+
+        a = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, 0.5]))
+        b = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, 0.75]))
+        print(manifold.rminus(a, b).round(3))
+        # [0.   0.   0.25]
+        ```
     """
 
     def minus(x, y):
@@ -139,21 +183,40 @@ def _on_tangents(fun, argnums):
     return nums, at
 
 
-def value_and_grad(fun, argnums=0, has_aux: bool = False):
-    """``jax.value_and_grad`` on the group: the derivative of ``fun`` along right
-    perturbations of its group-valued arguments.
+def value_and_grad(
+    fun: Callable, argnums: int | tuple[int, ...] = 0, has_aux: bool = False
+) -> Callable:
+    """`jax.value_and_grad` on the group: the derivative of `fun` along right perturbations of
+    its group-valued arguments.
 
     Args:
-        fun: a function of pytrees whose leaves are ``Rotation``, ``RigidTransform`` or
-            arrays, returning a scalar (and auxiliary data with ``has_aux``).
+        fun: a function of pytrees whose leaves are [`Rotation`][rotjax.Rotation],
+            [`RigidTransform`][rotjax.RigidTransform] or arrays, returning a scalar (and
+            auxiliary data with `has_aux`).
         argnums: the argument (an int) or arguments (a tuple of ints) to differentiate.
-        has_aux: ``fun`` returns ``(value, aux)``.
+        has_aux: `fun` returns `(value, aux)`.
 
     Returns:
-        A function of ``fun``'s arguments returning ``(value, tangent_gradient)`` (``((value,
-        aux), tangent_gradient)`` with ``has_aux``), where the gradient is
-        ``d fun(rplus(x, d)) / d d`` at ``d = 0``, shaped like ``zero_tangents(x)`` (a tuple of
-        them for a tuple ``argnums``).
+        A function of `fun`'s arguments returning `(value, tangent_gradient)`
+            (`((value, aux), tangent_gradient)` with `has_aux`), where the gradient is
+            `d fun(rplus(x, d)) / d d` at `d = 0`, shaped like `zero_tangents(x)` (a tuple of
+            them for a tuple `argnums`).
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+        from rotjax import manifold
+
+        x, y = jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0])
+
+        def loss(R):  # half the squared distance of R x from y
+            return 0.5 * jnp.sum((R.apply(x) - y) ** 2)
+
+        value, g = manifold.value_and_grad(loss)(rj.Rotation.identity())
+        print(value, g)
+        # 1.0 [ 0.  0. -1.]
+        ```
     """
     nums, at = _on_tangents(fun, argnums)
 
@@ -167,21 +230,39 @@ def value_and_grad(fun, argnums=0, has_aux: bool = False):
     return wrapped
 
 
-def grad(fun, argnums=0, has_aux: bool = False):
-    """``jax.grad`` on the group: the tangent-space gradient ``d fun(rplus(x, d)) / d d`` at
-    ``d = 0``.
+def grad(fun: Callable, argnums: int | tuple[int, ...] = 0, has_aux: bool = False) -> Callable:
+    """`jax.grad` on the group: the tangent-space gradient `d fun(rplus(x, d)) / d d` at `d = 0`.
 
     Args:
-        fun: a function of pytrees whose leaves are ``Rotation``, ``RigidTransform`` or
-            arrays, returning a scalar (and auxiliary data with ``has_aux``).
+        fun: a function of pytrees whose leaves are [`Rotation`][rotjax.Rotation],
+            [`RigidTransform`][rotjax.RigidTransform] or arrays, returning a scalar (and
+            auxiliary data with `has_aux`).
         argnums: the argument (an int) or arguments (a tuple of ints) to differentiate.
-        has_aux: ``fun`` returns ``(value, aux)``; the gradient function then returns
-            ``(gradient, aux)``.
+        has_aux: `fun` returns `(value, aux)`; the gradient function then returns
+            `(gradient, aux)`.
 
     Returns:
-        A function of ``fun``'s arguments returning the gradient, shaped like
-        ``zero_tangents(x)`` (a tuple of them for a tuple ``argnums``). For a ``Rotation``
-        it is the body-frame gradient: ``f(x * exp(d)) = f(x) + <grad, d> + O(|d|^2)``.
+        A function of `fun`'s arguments returning the gradient, shaped like
+            `zero_tangents(x)` (a tuple of them for a tuple `argnums`). For a `Rotation` it is
+            the body-frame gradient: `f(x * exp(d)) = f(x) + <grad, d> + O(|d|^2)`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+        from rotjax import manifold
+
+        target = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, 1.0]))
+
+        def loss(R):  # half the squared geodesic distance to target
+            return 0.5 * jnp.sum(manifold.rminus(R, target) ** 2)
+
+        R = rj.Rotation.identity()
+        for _ in range(3):  # gradient steps on the group: each halves the angle
+            R = manifold.rplus(R, -0.5 * manifold.grad(loss)(R))
+        print(round(float(R.as_rotvec()[2]), 3))
+        # 0.875
+        ```
     """
     vg = value_and_grad(fun, argnums, has_aux)
 
