@@ -1,17 +1,20 @@
-"""``RigidTransform``: scipy's rigid-transform API over rotjax's functions, as a pytree.
+"""`RigidTransform`: scipy's rigid-transform API over rotjax's functions, as a pytree.
 
-The class holds two arrays, the ``(..., 4)`` scalar-last unit quaternion of the rotation and
-the ``(..., 3)`` translation, so that ``T v = R v + t``; every computation is one jitted
+The class holds two arrays, the `(..., 4)` scalar-last unit quaternion of the rotation and
+the `(..., 3)` translation, so that `T v = R v + t`; every computation is one jitted
 function of those arrays, built on rotjax's quaternion and rotation-vector functions.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike, DTypeLike
 
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
@@ -172,20 +175,28 @@ def _mean(q, t, w):
 
 
 @public
-def normalize_dual_quaternion(dual_quat, *, scalar_first: bool = False):
+def normalize_dual_quaternion(dual_quat: ArrayLike, *, scalar_first: bool = False) -> Array:
     """Normalise dual quaternions (scipy's definition).
 
-    A unit dual quaternion ``r + eps d`` has a unit real part ``r`` and a dual part ``d``
-    orthogonal to it. This divides both parts by ``|r|`` and then removes from ``d`` its
-    component along ``r``; a zero real part becomes the identity ``[0, 0, 0, 1]`` (scipy's
-    rule), with the dual part kept.
+    A unit dual quaternion `r + eps d` has a unit real part `r` and a dual part `d` orthogonal
+    to it. This divides both parts by `|r|` and then removes from `d` its component along `r`;
+    a zero real part becomes the identity `[0, 0, 0, 1]` (scipy's rule), with the dual part
+    kept.
 
     Args:
-        dual_quat: ``(..., 8)`` dual quaternions ``[real, dual]``, each part scalar last.
-        scalar_first: each part is ``[w, x, y, z]`` (the result too).
+        dual_quat: `(..., 8)` dual quaternions `[real, dual]`, each part scalar last.
+        scalar_first: each part is `[w, x, y, z]` (the result too).
 
     Returns:
-        ``(..., 8)`` unit dual quaternions, in the input's layout and dtype.
+        `(..., 8)` unit dual quaternions, in the input's layout and dtype.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.normalize_dual_quaternion([0.0, 0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 1.0]))
+        # [0.  0.  0.  1.  0.5 0.  0.  0. ]
+        ```
     """
     dq = jnp.asarray(dual_quat)
     if dq.ndim < 1 or dq.shape[-1] != 8:
@@ -241,35 +252,50 @@ def _check_index(indexer, n: int):
 class RigidTransform:
     """Rigid transforms (rotation and translation) in 3 dimensions, scipy's API on JAX arrays.
 
-    ``T v = R v + t``: a rotation ``R`` followed by a translation ``t``; as a matrix
-    ``[[R, t], [0, 1]]`` acting on ``[v, 1]``. ``p * q`` applies ``q`` first.
+    `T v = R v + t`: a rotation `R` followed by a translation `t`; as a matrix
+    `[[R, t], [0, 1]]` acting on `[v, 1]`. `p * q` applies `q` first.
 
-    A ``RigidTransform`` is a pytree of two leaves, the ``(..., 4)`` unit quaternion of ``R``
-    (scalar last) and the ``(..., 3)`` translation, with no other data: every constructor
-    gives the same tree structure, ``jax.jit`` takes and returns it, ``jax.vmap`` maps over its
-    batch axes, ``lax.scan`` carries it and ``jax.grad`` differentiates through every method.
-    A transform with ``(4,)`` and ``(3,)`` leaves is *single* (no ``len``, no indexing);
-    otherwise ``shape`` is the batch shape. float32 and float64 are kept.
+    A `RigidTransform` is a pytree of two leaves, the `(..., 4)` unit quaternion of `R` (scalar
+    last) and the `(..., 3)` translation, with no other data: every constructor gives the same
+    tree structure, `jax.jit` takes and returns it, `jax.vmap` maps over its batch axes,
+    `lax.scan` carries it and `jax.grad` differentiates through every method. A transform with
+    `(4,)` and `(3,)` leaves is *single* (no `len`, no indexing); otherwise `shape` is the batch
+    shape. float32 and float64 are kept.
 
-    Exponential coordinates are scipy's ``[rotation vector, v]`` (rotation first):
-    ``exp([phi, v]) = (exp(phi), J(phi) v)`` with ``J`` the left Jacobian of SO(3). Their
+    Exponential coordinates are scipy's `[rotation vector, v]` (rotation first):
+    `exp([phi, v]) = (exp(phi), J(phi) v)` with `J` the left Jacobian of SO(3). Their
     derivatives are exact at zero rotation and finite up to and at 180 degrees.
 
-    Values scipy rejects (a matrix whose last row is not ``[0, 0, 0, 1]`` or whose rotation
-    block has ``det <= 0``, negative weights) raise ``ValueError`` when they arrive as NumPy
-    arrays, lists or numbers; as JAX arrays, and always under ``jit``, they give NaN for the
-    affected transforms.
+    Values scipy rejects (a matrix whose last row is not `[0, 0, 0, 1]` or whose rotation block
+    has `det <= 0`, negative weights) raise `ValueError` when they arrive as NumPy arrays, lists
+    or numbers; as JAX arrays, and always under `jit`, they give NaN for the affected
+    transforms.
 
     Args:
-        matrix: ``(..., 4, 4)`` homogeneous transformation matrices (as ``from_matrix``).
+        matrix: `(..., 4, 4)` homogeneous transformation matrices (as
+            [`from_matrix`][rotjax.RigidTransform.from_matrix]).
         normalize: replace each rotation block by the nearest rotation and check the matrix;
-            ``False`` takes the rotation block as a rotation matrix unchecked.
+            `False` takes the rotation block as a rotation matrix unchecked.
         copy: accepted for scipy compatibility (JAX arrays are immutable).
+
+    Examples:
+        ```python
+        import jax
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        R = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, jnp.pi / 2]))
+        T = rj.RigidTransform.from_components(jnp.array([1.0, 0.0, 0.0]), R)
+        print(T.apply(jnp.array([1.0, 0.0, 0.0])).round(3))  # rotate, then translate
+        # [1. 1. 0.]
+        print(jax.jit(lambda T: T.inv() * T)(T).as_exp_coords().round(3))  # a pytree under jit
+        # [ 0.  0. -0.  0.  0.  0.]
+        ```
     """
 
     __slots__ = ("_quat", "_translation")
 
-    def __init__(self, matrix, normalize: bool = True, copy: bool = True):
+    def __init__(self, matrix: ArrayLike, normalize: bool = True, copy: bool = True):
         del copy  # JAX arrays are immutable: there is nothing to copy
         m = _input(matrix)
         if m.ndim < 2 or m.shape[-2:] != (4, 4):
@@ -318,17 +344,17 @@ class RigidTransform:
 
     @property
     def shape(self) -> tuple[int, ...]:
-        """The batch shape (``()`` for a single transform)."""
+        """The batch shape (`()` for a single transform)."""
         return tuple(self._quat.shape[:-1])
 
     @property
     def rotation(self) -> Rotation:
-        """The rotation part, a ``Rotation`` of shape ``shape``."""
+        """The rotation part, a [`Rotation`][rotjax.Rotation] of shape `shape`."""
         return Rotation._raw(self._quat)
 
     @property
-    def translation(self):
-        """The translation part, ``(..., 3)``."""
+    def translation(self) -> Array:
+        """The translation part, `(..., 3)`."""
         return self._translation
 
     def __len__(self) -> int:
@@ -382,18 +408,54 @@ class RigidTransform:
     # --- constructors --------------------------------------------------------------------
 
     @staticmethod
-    def from_matrix(matrix) -> RigidTransform:
-        """From ``(..., 4, 4)`` homogeneous transformation matrices ``[[R, t], [0, 1]]``.
+    def from_matrix(matrix: ArrayLike) -> RigidTransform:
+        """From `(..., 4, 4)` homogeneous transformation matrices `[[R, t], [0, 1]]`.
 
         Each rotation block is replaced by the nearest rotation matrix (Frobenius norm, as
-        ``Rotation.from_matrix``). A block with ``det <= 0`` or a last row other than
-        ``[0, 0, 0, 1]`` raises ``ValueError`` for NumPy input and gives NaN for JAX input.
+        `Rotation.from_matrix`). A block with `det <= 0` or a last row other than `[0, 0, 0, 1]`
+        raises `ValueError` for NumPy input and gives NaN for JAX input.
+
+        Args:
+            matrix: `(..., 4, 4)` homogeneous transformation matrices.
+
+        Returns:
+            The transforms, of batch shape `matrix.shape[:-2]`.
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            import rotjax as rj
+
+            T = rj.RigidTransform.from_matrix(jnp.eye(4).at[:3, 3].set(jnp.array([1.0, 2.0, 3.0])))
+            print(T.translation, T.single)
+            # [1. 2. 3.] True
+            ```
         """
         return RigidTransform(matrix)
 
     @staticmethod
     def from_rotation(rotation: Rotation) -> RigidTransform:
-        """A pure rotation (zero translation) from a ``Rotation``."""
+        """A pure rotation (zero translation) from a [`Rotation`][rotjax.Rotation].
+
+        Args:
+            rotation: the rotations; their shape is the transforms' batch shape.
+
+        Returns:
+            The transforms `[[R, 0], [0, 1]]`.
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            import rotjax as rj
+
+            R = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, jnp.pi / 2]))
+            print(rj.RigidTransform.from_rotation(R).as_matrix().round(3))
+            # [[-0. -1.  0.  0.]
+            #  [ 1. -0.  0.  0.]
+            #  [ 0.  0.  1.  0.]
+            #  [ 0.  0.  0.  1.]]
+            ```
+        """
         if not isinstance(rotation, Rotation):
             raise TypeError(
                 f"Expected `rotation` to be a `Rotation` instance, got {type(rotation)}."
@@ -402,19 +464,51 @@ class RigidTransform:
         return RigidTransform._raw(q, jnp.zeros(q.shape[:-1] + (3,), q.dtype))
 
     @staticmethod
-    def from_translation(translation) -> RigidTransform:
-        """A pure translation from ``(..., 3)`` vectors."""
+    def from_translation(translation: ArrayLike) -> RigidTransform:
+        """A pure translation from `(..., 3)` vectors.
+
+        Args:
+            translation: `(..., 3)` translations; their batch shape is the transforms'.
+
+        Returns:
+            The transforms `[[I, t], [0, 1]]`.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            T = rj.RigidTransform.from_translation([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0]])
+            print(T.shape, T.apply([1.0, 1.0, 1.0]))
+            # (2,) [[2. 1. 1.]
+            #  [1. 3. 1.]]
+            ```
+        """
         t = _float(translation)
         _check_last(t, 3, "translation")
         return RigidTransform._raw(_identity_quat(t.shape[:-1], t.dtype), t)
 
     @staticmethod
-    def from_components(translation, rotation: Rotation) -> RigidTransform:
-        """Rotation followed by translation: ``T v = rotation.apply(v) + translation``.
+    def from_components(translation: ArrayLike, rotation: Rotation) -> RigidTransform:
+        """Rotation followed by translation: `T v = rotation.apply(v) + translation`.
 
         Args:
-            translation: ``(..., 3)`` translations.
-            rotation: a ``Rotation``; its batch shape broadcasts with the translation's.
+            translation: `(..., 3)` translations.
+            rotation: a [`Rotation`][rotjax.Rotation]; its batch shape broadcasts with the
+                translation's.
+
+        Returns:
+            The transforms `[[R, t], [0, 1]]`, of the broadcast batch shape.
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            import rotjax as rj
+
+            R = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, jnp.pi / 2]))
+            T = rj.RigidTransform.from_components(jnp.array([1.0, 0.0, 0.0]), R)
+            print(T.apply(jnp.array([1.0, 0.0, 0.0])).round(3))
+            # [1. 1. 0.]
+            ```
         """
         if not isinstance(rotation, Rotation):
             raise TypeError(
@@ -432,41 +526,90 @@ class RigidTransform:
         return RigidTransform._raw(q, t)
 
     @staticmethod
-    def from_exp_coords(exp_coords) -> RigidTransform:
-        """From exponential coordinates ``[phi, v]``, ``(..., 6)``, rotation vector first.
+    def from_exp_coords(exp_coords: ArrayLike) -> RigidTransform:
+        """From exponential coordinates `[phi, v]`, `(..., 6)`, rotation vector first.
 
-        ``exp([phi, v])`` is the rotation ``exp(phi)`` with translation ``J(phi) v``, ``J``
-        the left Jacobian of SO(3) (scipy's and Lynch and Park's convention): the transform
-        reached at time 1 by the constant twist ``[phi, v]`` in the body frame.
+        `exp([phi, v])` is the rotation `exp(phi)` with translation `J(phi) v`, `J` the left
+        Jacobian of SO(3) (scipy's and Lynch and Park's convention): the transform reached at time
+        1 by the constant twist `[phi, v]` in the body frame.
+
+        Args:
+            exp_coords: `(..., 6)` exponential coordinates `[phi, v]`.
+
+        Returns:
+            The transforms, of batch shape `exp_coords.shape[:-1]`.
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            import rotjax as rj
+
+            # a quarter turn about z while moving 1 along x
+            T = rj.RigidTransform.from_exp_coords(jnp.array([0.0, 0.0, jnp.pi / 2, 1.0, 0.0, 0.0]))
+            print(T.translation.round(3))
+            # [0.637 0.637 0.   ]
+            ```
         """
         xi = _input(exp_coords)
         _check_last(xi, 6, "exp_coords")
         return RigidTransform._raw(*_from_exp_coords(xi))
 
     @staticmethod
-    def from_dual_quat(dual_quat, *, scalar_first: bool = False) -> RigidTransform:
-        """From ``(..., 8)`` unit dual quaternions ``[real, dual]``.
+    def from_dual_quat(dual_quat: ArrayLike, *, scalar_first: bool = False) -> RigidTransform:
+        """From `(..., 8)` unit dual quaternions `[real, dual]`.
 
         The input is normalised first (see
-        [`normalize_dual_quaternion`][rotjax.normalize_dual_quaternion]): a zero real part
-        is the identity rotation, as in scipy.
+        [`normalize_dual_quaternion`][rotjax.normalize_dual_quaternion]): a zero real part is the
+        identity rotation, as in scipy.
 
         Args:
-            dual_quat: real part (the rotation's quaternion) then dual part, each scalar last.
-            scalar_first: each part is ``[w, x, y, z]``.
+            dual_quat: `(..., 8)` real part (the rotation's quaternion) then dual part, each
+                scalar last.
+            scalar_first: each part is `[w, x, y, z]`.
+
+        Returns:
+            The transforms, of batch shape `dual_quat.shape[:-1]`.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            # identity rotation, dual part t q / 2 for t = [2, 0, 0]
+            T = rj.RigidTransform.from_dual_quat([0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+            print(T.translation)
+            # [2. 0. 0.]
+            ```
         """
         dq = _input(dual_quat)
         _check_last(dq, 8, "dual_quat")
         return RigidTransform._raw(*_from_dual_quat(dq, scalar_first=bool(scalar_first)))
 
     @staticmethod
-    def identity(num: int | None = None, *, shape=None, dtype=None) -> RigidTransform:
+    def identity(
+        num: int | None = None,
+        *,
+        shape: int | tuple[int, ...] | None = None,
+        dtype: DTypeLike | None = None,
+    ) -> RigidTransform:
         """The identity transform.
 
         Args:
-            num: number of transforms (``None``: a single one).
-            shape: batch shape, instead of ``num``.
-            dtype: float dtype; JAX's default float if ``None``.
+            num: number of transforms (`None`: a single one).
+            shape: batch shape, instead of `num`.
+            dtype: float dtype; JAX's default float if `None`.
+
+        Returns:
+            Identity transforms of batch shape `(num,)`, `shape`, or `()`.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            print(rj.RigidTransform.identity().single)
+            # True
+            print(rj.RigidTransform.identity(shape=(2, 3)).shape)
+            # (2, 3)
+            ```
         """
         if num is not None and shape is not None:
             raise ValueError("Only one of `num` and `shape` can be specified.")
@@ -482,8 +625,26 @@ class RigidTransform:
         return RigidTransform._raw(_identity_quat(shape, dt), jnp.zeros((*shape, 3), dt))
 
     @staticmethod
-    def concatenate(transforms) -> RigidTransform:
-        """Concatenate transforms along the first batch axis (single ones count as one)."""
+    def concatenate(transforms: RigidTransform | Sequence[RigidTransform]) -> RigidTransform:
+        """Concatenate transforms along the first batch axis (single ones count as one).
+
+        Args:
+            transforms: a `RigidTransform`, or a sequence of them.
+
+        Returns:
+            One batch of transforms.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            T = rj.RigidTransform.concatenate(
+                [rj.RigidTransform.identity(), rj.RigidTransform.identity(2)]
+            )
+            print(T.shape)
+            # (3,)
+            ```
+        """
         if isinstance(transforms, RigidTransform):
             return RigidTransform._raw(transforms._quat, transforms._translation)
         transforms = list(transforms)
@@ -495,22 +656,83 @@ class RigidTransform:
 
     # --- conversions ---------------------------------------------------------------------
 
-    def as_matrix(self):
-        """Homogeneous transformation matrices ``[[R, t], [0, 1]]``, ``(..., 4, 4)``."""
+    def as_matrix(self) -> Array:
+        """Homogeneous transformation matrices `[[R, t], [0, 1]]`.
+
+        Returns:
+            `(..., 4, 4)` matrices acting on column vectors `[v, 1]`.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            print(rj.RigidTransform.from_translation([1.0, 2.0, 3.0]).as_matrix())
+            # [[1. 0. 0. 1.]
+            #  [0. 1. 0. 2.]
+            #  [0. 0. 1. 3.]
+            #  [0. 0. 0. 1.]]
+            ```
+        """
         return _as_matrix(self._quat, self._translation)
 
-    def as_components(self):
-        """``(translation, rotation)``: ``(..., 3)`` and a ``Rotation``."""
+    def as_components(self) -> tuple[Array, Rotation]:
+        """The translation and the rotation.
+
+        Returns:
+            translation: `(..., 3)` translations `t`.
+            rotation: the rotations `R`, a [`Rotation`][rotjax.Rotation] of shape `shape`.
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            import rotjax as rj
+
+            R = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, 0.5]))
+            t, R2 = rj.RigidTransform.from_components(jnp.array([1.0, 2.0, 3.0]), R).as_components()
+            print(t, R2.as_rotvec().round(3))
+            # [1. 2. 3.] [0.  0.  0.5]
+            ```
+        """
         return self.translation, self.rotation
 
-    def as_exp_coords(self):
-        """Exponential coordinates ``[phi, v]``, ``(..., 6)``: the rotation vector ``phi``
-        (angle in ``[0, pi]``) and ``v = J(phi)^-1 t``."""
+    def as_exp_coords(self) -> Array:
+        """Exponential coordinates `[phi, v]`: the rotation vector `phi` (angle in `[0, pi]`) and
+        `v = J(phi)^-1 t`.
+
+        Returns:
+            `(..., 6)` exponential coordinates, rotation vector first (inverse of
+                [`from_exp_coords`][rotjax.RigidTransform.from_exp_coords]).
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            import rotjax as rj
+
+            xi = jnp.array([0.0, 0.0, 0.5, 1.0, 0.0, 0.0])
+            print(rj.RigidTransform.from_exp_coords(xi).as_exp_coords().round(3))
+            # [ 0.   0.   0.5  1.  -0.   0. ]
+            ```
+        """
         return _as_exp_coords(self._quat, self._translation)
 
-    def as_dual_quat(self, *, scalar_first: bool = False):
-        """Unit dual quaternions ``[q, t q / 2]``, ``(..., 8)`` (each part scalar last unless
-        ``scalar_first``); ``q`` is the stored quaternion, of either sign."""
+    def as_dual_quat(self, *, scalar_first: bool = False) -> Array:
+        """Unit dual quaternions `[q, t q / 2]`.
+
+        Args:
+            scalar_first: each part is `[w, x, y, z]`.
+
+        Returns:
+            `(..., 8)` dual quaternions, each part scalar last unless `scalar_first`; `q` is the
+                stored quaternion, of either sign.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            print(rj.RigidTransform.from_translation([2.0, 0.0, 0.0]).as_dual_quat())
+            # [0. 0. 0. 1. 1. 0. 0. 0.]
+            ```
+        """
         return _as_dual_quat(self._quat, self._translation, scalar_first=bool(scalar_first))
 
     # --- algebra -------------------------------------------------------------------------
@@ -534,11 +756,30 @@ class RigidTransform:
         q1, t1, q2, t2 = _common(self._quat, self._translation, other._quat, other._translation)
         return RigidTransform._raw(*_compose(q1, t1, q2, t2))
 
-    def __mul__(self, other):
-        """Composition ``self * other``: ``other`` applied first; batch shapes broadcast.
+    def __mul__(self, other: RigidTransform | Rotation) -> RigidTransform:
+        """Composition `self * other`: `other` applied first; batch shapes broadcast.
 
-        ``other`` may be a ``Rotation`` (a transform with zero translation); so may the left
-        operand (``Rotation * RigidTransform``).
+        `other` may be a [`Rotation`][rotjax.Rotation] (a transform with zero translation); so may
+        the left operand (`Rotation * RigidTransform`).
+
+        Args:
+            other: the transform applied first.
+
+        Returns:
+            The composed transforms, `(self * other).apply(v) == self.apply(other.apply(v))`.
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            import rotjax as rj
+
+            R = rj.Rotation.from_rotvec(jnp.array([0.0, 0.0, jnp.pi / 2]))
+            T = rj.RigidTransform.from_translation(jnp.array([1.0, 0.0, 0.0]))
+            print((T * R).apply(jnp.array([1.0, 0.0, 0.0])).round(3))  # rotate, then translate
+            # [1. 1. 0.]
+            print((R * T).apply(jnp.array([1.0, 0.0, 0.0])).round(3))  # translate, then rotate
+            # [0. 2. 0.]
+            ```
         """
         other = self._operand(other)
         if other is None:
@@ -551,11 +792,27 @@ class RigidTransform:
             return NotImplemented
         return other._compose(self)
 
-    def __pow__(self, n, modulus=None) -> RigidTransform:
-        """Fractional power ``exp(n log T)``: ``n`` times the screw motion of ``T``.
+    def __pow__(self, n: ArrayLike, modulus: None = None) -> RigidTransform:
+        """Fractional power `exp(n log T)`: `n` times the screw motion of `T`.
 
-        ``n`` is a scalar (an array of shape ``()`` or ``(1,)``); ``T ** 0`` is the identity
-        exactly, ``T ** -1`` the inverse to rounding.
+        `T ** 0` is the identity exactly, `T ** -1` the inverse to rounding.
+
+        Args:
+            n: `()` or `(1,)` exponent.
+            modulus: not supported (scipy's signature); must be `None`.
+
+        Returns:
+            The transforms `exp(n log T)`, of the batch shape of `T`.
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            import rotjax as rj
+
+            T = rj.RigidTransform.from_exp_coords(jnp.array([0.0, 0.0, 1.0, 2.0, 0.0, 0.0]))
+            print((T ** 0.5).as_exp_coords().round(3))  # half the screw motion
+            # [ 0.   0.   0.5  1.  -0.   0. ]
+            ```
         """
         if modulus is not None:
             raise NotImplementedError("modulus not supported")
@@ -568,18 +825,39 @@ class RigidTransform:
         return RigidTransform._raw(*_pow(self._quat, self._translation, e))
 
     def inv(self) -> RigidTransform:
-        """The inverse transforms: ``R^T`` and ``-R^T t``."""
+        """The inverse transforms: `R^T` and `-R^T t`.
+
+        Returns:
+            The inverses, of the same batch shape.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            print(rj.RigidTransform.from_translation([1.0, 2.0, 3.0]).inv().translation)
+            # [-1. -2. -3.]
+            ```
+        """
         return RigidTransform._raw(*_inv(self._quat, self._translation))
 
-    def apply(self, vector, inverse: bool = False):
-        """Transform vectors: ``R v + t`` (``R^T (v - t)`` with ``inverse``).
+    def apply(self, vector: ArrayLike, inverse: bool = False) -> Array:
+        """Transform vectors: `R v + t` (`R^T (v - t)` with `inverse`).
 
         Args:
-            vector: ``(..., 3)`` vectors; batch shapes broadcast with the transforms'.
+            vector: `(..., 3)` vectors; batch shapes broadcast with the transforms'.
             inverse: apply the inverse transform.
 
         Returns:
-            ``(..., 3)`` vectors, in the transform's dtype.
+            `(..., 3)` vectors, in the transform's dtype.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            T = rj.RigidTransform.from_translation([1.0, 2.0, 3.0])
+            print(T.apply([1.0, 1.0, 1.0]), T.apply([1.0, 1.0, 1.0], inverse=True))
+            # [2. 3. 4.] [ 0. -1. -2.]
+            ```
         """
         dtype = self._quat.dtype
         host = _concrete(vector)
@@ -595,13 +873,27 @@ class RigidTransform:
             ) from None
         return _apply(self._quat, self._translation, v, inverse=bool(inverse))
 
-    def mean(self, weights=None, axis=None) -> RigidTransform:
-        """Weighted mean: the mean rotation (as ``Rotation.mean``) and the weighted mean of
-        the translations.
+    def mean(
+        self, weights: ArrayLike | None = None, axis: int | tuple[int, ...] | None = None
+    ) -> RigidTransform:
+        """Weighted mean: the mean rotation (as `Rotation.mean`) and the weighted mean of the
+        translations.
 
         Args:
-            weights: non-negative weights of shape ``shape``; ``None`` for equal weights.
-            axis: batch axis or axes to reduce; ``None`` for all.
+            weights: `shape` non-negative weights; `None` for equal weights.
+            axis: batch axis or axes to reduce; `None` for all.
+
+        Returns:
+            The mean transforms, of the batch shape without the reduced axes.
+
+        Examples:
+            ```python
+            import rotjax as rj
+
+            T = rj.RigidTransform.from_translation([[0.0, 0.0, 0.0], [2.0, 4.0, 0.0]])
+            print(T.mean().translation, T.mean(weights=[3.0, 1.0]).translation)
+            # [1. 2. 0.] [0.5 1.  0. ]
+            ```
         """
         q, t = self._quat, self._translation
         if self.single:
