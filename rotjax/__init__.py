@@ -9,6 +9,7 @@ dimensions broadcast; float32 and float64 are kept; every function works under `
 gradient policy and guides are in the documentation (``docs/``).
 """
 
+from . import manifold as manifold
 from ._algebra import quaternion_canonical as quaternion_canonical
 from ._algebra import quaternion_power as quaternion_power
 from ._algebra import quaternion_reduce as quaternion_reduce
@@ -67,6 +68,8 @@ from ._quaternion import quaternion_normalize as quaternion_normalize
 from ._quaternion import quaternion_to_matrix as quaternion_to_matrix
 from ._quaternion import relative_rotation as relative_rotation
 from ._quaternion import rotation_angle as rotation_angle
+from ._rigid import RigidTransform as RigidTransform
+from ._rigid import normalize_dual_quaternion as normalize_dual_quaternion
 from ._rotation import Rotation as Rotation
 from ._rotation import RotationSpline as RotationSpline
 from ._rotation import Slerp as Slerp
@@ -76,10 +79,24 @@ from ._rotvec import quaternion_to_axis_angle as quaternion_to_axis_angle
 from ._rotvec import quaternion_to_rotvec as quaternion_to_rotvec
 from ._rotvec import rotvec_to_matrix as rotvec_to_matrix
 from ._rotvec import rotvec_to_quaternion as rotvec_to_quaternion
+from ._se3 import hat as hat
+from ._se3 import se3_adjoint as se3_adjoint
+from ._se3 import se3_exp as se3_exp
+from ._se3 import se3_left_jacobian as se3_left_jacobian
+from ._se3 import se3_left_jacobian_inverse as se3_left_jacobian_inverse
+from ._se3 import se3_log as se3_log
+from ._se3 import se3_right_jacobian as se3_right_jacobian
+from ._se3 import se3_right_jacobian_inverse as se3_right_jacobian_inverse
+from ._se3 import so3_left_jacobian as so3_left_jacobian
+from ._se3 import so3_left_jacobian_inverse as so3_left_jacobian_inverse
+from ._se3 import so3_right_jacobian as so3_right_jacobian
+from ._se3 import so3_right_jacobian_inverse as so3_right_jacobian_inverse
+from ._se3 import vee as vee
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "RigidTransform",
     "Rotation",
     "RotationSpline",
     "Slerp",
@@ -98,8 +115,10 @@ __all__ = [
     "euler_to_matrix",
     "euler_to_quaternion",
     "geodesic_distance",
+    "hat",
     "integrate_angular_velocity",
     "integrate_angular_velocity_samples",
+    "manifold",
     "matrix_derivative_to_angular_velocity",
     "matrix_to_euler",
     "matrix_to_quaternion",
@@ -107,6 +126,7 @@ __all__ = [
     "matrix_to_sixd",
     "mrp_to_quaternion",
     "nined_to_matrix",
+    "normalize_dual_quaternion",
     "partition_coordinates",
     "quaternion_apply",
     "quaternion_canonical",
@@ -130,9 +150,21 @@ __all__ = [
     "rotation_group",
     "rotvec_to_matrix",
     "rotvec_to_quaternion",
+    "se3_adjoint",
+    "se3_exp",
+    "se3_left_jacobian",
+    "se3_left_jacobian_inverse",
+    "se3_log",
+    "se3_right_jacobian",
+    "se3_right_jacobian_inverse",
     "sixd_to_matrix",
     "slerp",
+    "so3_left_jacobian",
+    "so3_left_jacobian_inverse",
+    "so3_right_jacobian",
+    "so3_right_jacobian_inverse",
     "unwrap_euler",
     "unwrap_quaternion",
+    "vee",
     "wahba_sensitivity",
 ]

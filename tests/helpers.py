@@ -97,6 +97,10 @@ def every_public(q, r, w, a):
     # quaternions near q[0], of both signs and not unit: a mean that is well conditioned (the
     # mean of uniformly random rotations is not: its 4x4 scatter matrix has close eigenvalues)
     cluster = (q[0] + q / 5) * np.where(np.arange(n) % 2 == 0, 1, -1).astype(q.dtype)[:, None]
+    # SE(3): exponential coordinates [rotvec, v] and homogeneous transforms [[R, t], [0, 1]]
+    xi = np.concatenate([w, a], axis=-1)
+    T = np.zeros((*np.shape(r)[:-2], 4, 4), np.asarray(r).dtype)
+    T[..., :3, :3], T[..., :3, 3], T[..., 3, 3] = r, a, 1
     return {
         "quaternion_to_matrix": (rj.quaternion_to_matrix, (q,)),
         "matrix_to_quaternion": (lambda r: rj.matrix_to_quaternion(r, method="optimal"), (r,)),
@@ -195,6 +199,20 @@ def every_public(q, r, w, a):
             lambda q: rj.quaternion_to_davenport(q, np.asarray(_OBLIQUE, q.dtype)),
             (q,),
         ),
+        # Lie calculus of SO(3) and SE(3)
+        "hat": (rj.hat, (w,)),
+        "vee": (rj.vee, (r,)),
+        "so3_left_jacobian": (rj.so3_left_jacobian, (w,)),
+        "so3_right_jacobian": (rj.so3_right_jacobian, (w,)),
+        "so3_left_jacobian_inverse": (rj.so3_left_jacobian_inverse, (w,)),
+        "so3_right_jacobian_inverse": (rj.so3_right_jacobian_inverse, (w,)),
+        "se3_exp": (rj.se3_exp, (xi,)),
+        "se3_log": (rj.se3_log, (T,)),
+        "se3_adjoint": (rj.se3_adjoint, (T,)),
+        "se3_left_jacobian": (rj.se3_left_jacobian, (xi,)),
+        "se3_right_jacobian": (rj.se3_right_jacobian, (xi,)),
+        "se3_left_jacobian_inverse": (rj.se3_left_jacobian_inverse, (xi,)),
+        "se3_right_jacobian_inverse": (rj.se3_right_jacobian_inverse, (xi,)),
         "Rotation": (lambda q: rj.Rotation.from_quat(q).as_euler("XYZ"), (q,)),
         "Slerp": (
             lambda q: rj.Slerp(np.arange(8, dtype=q.dtype), rj.Rotation.from_quat(q[:8]))(

@@ -415,3 +415,356 @@ CASES = {
         ),
     ]
 }
+
+
+# --- SE(3) and SO(3) Lie calculus ------------------------------------------------------------
+# Exponential coordinates are rotjax's and scipy's [rotvec, v]; jaxlie's tangents are [v, rotvec]
+# and its parameters [wxyz, xyz]: the adapters reorder at the boundary.
+
+
+def _rotvecs(q):
+    """Rotation vectors (angle in [0, pi]) of unit quaternions (n, 4), float64."""
+    q = q * np.where(q[:, 3:] < 0, -1.0, 1.0)
+    n = np.linalg.norm(q[:, :3], axis=-1, keepdims=True)
+    safe = np.where(n > 0, n, 1.0)
+    return q[:, :3] * np.where(n > 0, 2 * np.arctan2(n, q[:, 3:]) / safe, 2.0)
+
+
+def _transforms(q, t):
+    T = np.zeros((len(q), 4, 4))
+    T[:, :3, :3], T[:, :3, 3], T[:, 3, 3] = A.np_matrix(q), t, 1.0
+    return T
+
+
+INPUTS.update(
+    {
+        # [rotvec, v]: uniform rotations (angles in [0, pi]), translations N(0, I)
+        "exp_coords": lambda rng, q: np.concatenate(
+            [_rotvecs(q), rng.normal(size=(len(q), 3))], axis=1
+        ),
+        "transform": lambda rng, q: _transforms(q, rng.normal(size=(len(q), 3))),
+        # [quaternion, translation, point]: (n, 10)
+        "pose_point": lambda rng, q: np.concatenate([q, rng.normal(size=(len(q), 6))], axis=1),
+    }
+)
+
+
+def _rigid(x):
+    """rotjax's RigidTransform of a (n, 10) [quaternion, translation, point] batch."""
+    from .. import RigidTransform, Rotation
+
+    return RigidTransform.from_components(x[..., 4:7], Rotation.from_quat(x[..., :4]))
+
+
+def _scipy_rigid(peers):
+    if "scipy" not in peers:
+        return None
+    from scipy.spatial.transform import RigidTransform
+
+    return RigidTransform
+
+
+def _se3_exp_contenders(p):
+    from .. import RigidTransform
+
+    out = [
+        rotjax_fn("se3_exp"),
+        Contender(
+            "rotjax",
+            "RigidTransform",
+            lambda x: RigidTransform.from_exp_coords(x).as_matrix(),
+            True,
+        ),
+    ]
+    if "jaxlie" in p:
+        import jax
+        import jax.numpy as jnp
+
+        SE3 = p["jaxlie"].SE3
+        fn = jax.vmap(lambda x: SE3.exp(jnp.roll(x, 3)).as_matrix())
+        out.append(Contender("jaxlie", "", fn, True))
+    S = _scipy_rigid(p)
+    if S is not None:
+        out.append(Contender("scipy", "", lambda x: S.from_exp_coords(x).as_matrix(), False))
+    return ordered(out)
+
+
+def _se3_log_contenders(p):
+    from .. import RigidTransform
+
+    out = [
+        rotjax_fn("se3_log"),
+        Contender(
+            "rotjax",
+            "RigidTransform",
+            lambda x: RigidTransform.from_matrix(x).as_exp_coords(),
+            True,
+        ),
+    ]
+    if "jaxlie" in p:
+        import jax
+        import jax.numpy as jnp
+
+        SE3 = p["jaxlie"].SE3
+        fn = jax.vmap(lambda T: jnp.roll(SE3.from_matrix(T).log(), 3))
+        out.append(Contender("jaxlie", "", fn, True))
+    S = _scipy_rigid(p)
+    if S is not None:
+        out.append(Contender("scipy", "", lambda x: S.from_matrix(x).as_exp_coords(), False))
+    return ordered(out)
+
+
+def _rigid_apply_contenders(p):
+    out = [Contender("rotjax", "RigidTransform", lambda x: _rigid(x).apply(x[..., 7:]), True)]
+    if "jaxlie" in p:
+        import jax
+        import jax.numpy as jnp
+
+        jl = p["jaxlie"]
+
+        def one(x):
+            T = jl.SE3.from_rotation_and_translation(jl.SO3(jnp.roll(x[:4], 1)), x[4:7])
+            return T.apply(x[7:])
+
+        out.append(Contender("jaxlie", "", jax.vmap(one), True))
+    S = _scipy_rigid(p)
+    if S is not None:
+        from scipy.spatial.transform import Rotation
+
+        def scipy_apply(x):
+            return S.from_components(x[..., 4:7], Rotation.from_quat(x[..., :4])).apply(x[..., 7:])
+
+        out.append(Contender("scipy", "", scipy_apply, False))
+    return ordered(out)
+
+
+def _so3_jr_contenders(p):
+    out = [rotjax_fn("so3_right_jacobian")]
+    if "jaxlie" in p:
+        import jax
+        from jaxlie._so3 import _SO3_jac_left  # jaxlie's own (private) left Jacobian
+
+        SO3 = p["jaxlie"].SO3
+        fn = jax.vmap(lambda w: _SO3_jac_left(-w, SO3.exp(-w).as_matrix()))
+        out.append(Contender("jaxlie", "jac_left(-w)", fn, True))
+    return out
+
+
+def _jlog_rotjax(q):
+    from .. import quaternion_to_rotvec, so3_right_jacobian_inverse
+
+    return so3_right_jacobian_inverse(quaternion_to_rotvec(q))
+
+
+def _jlog_contenders(p):
+    out = [Contender("rotjax", "Jr^-1(log q)", _jlog_rotjax, True)]
+    if "jaxlie" in p:
+        import jax
+        import jax.numpy as jnp
+
+        SO3 = p["jaxlie"].SO3
+        out.append(
+            Contender("jaxlie", "jlog", jax.vmap(lambda q: SO3(jnp.roll(q, 1)).jlog()), True)
+        )
+    return out
+
+
+def _jaxlie_se3(body, pre):
+    """jaxlie's SE3 in its own layout (the registry hands over SO3; SE3 is its neighbour)."""
+
+    def make(_SO3):
+        import jax
+        import jaxlie
+
+        return jax.vmap(lambda x: body(jaxlie.SE3, x)), pre
+
+    return make
+
+
+def _wxyz_xyz_point(x):
+    import jax.numpy as jnp
+
+    return jnp.concatenate([jnp.roll(x[..., :4], 1, axis=-1), x[..., 4:]], axis=-1)
+
+
+def _roll3(x):
+    import jax.numpy as jnp
+
+    return jnp.roll(x, 3, axis=-1)
+
+
+# mpmath references (80 digits where a closed form cancels at tiny angles)
+
+
+def _mp_lie():
+    import mpmath
+
+    return mpmath
+
+
+def _mp_hat(w):
+    mp = _mp_lie()
+    x, y, z = w
+    return mp.matrix([[0, -z, y], [z, 0, -x], [-y, x, 0]])
+
+
+def _mp_so3(w, kind):
+    """exp, Jl, Jr or Jr^-1 of a rotation vector (float list), at 80 digits."""
+    mp = _mp_lie()
+    with mp.workdps(80):
+        w = [mp.mpf(float(c)) for c in w]
+        K = _mp_hat(w)
+        t = mp.sqrt(sum(c * c for c in w))
+        K2 = K * K
+        if t == 0:
+            a, b, e = mp.mpf(1) / 2, mp.mpf(1) / 6, mp.mpf(1) / 12
+        else:
+            a, b = (1 - mp.cos(t)) / t**2, (t - mp.sin(t)) / t**3
+            e = (1 - t / 2 * mp.cot(t / 2)) / t**2
+        eye = mp.eye(3)
+        if kind == "exp":
+            out = eye + (mp.sin(t) / t if t else 1) * K + a * K2
+        elif kind == "jl":
+            out = eye + a * K + b * K2
+        elif kind == "jr":
+            out = eye - a * K + b * K2
+        else:  # jr_inv
+            out = eye + K / 2 + e * K2
+        return np.array([[float(out[i, j]) for j in range(3)] for i in range(3)])
+
+
+def _lie_sets(ev, cols):
+    """The basic quaternion sets as rotation vectors (rounded to the dtype), with ``cols - 3``
+    extra N(0, I) columns (translations, points), fixed per set."""
+    acc = ev.acc
+    rng = np.random.default_rng(35)
+    out = {}
+    for k in A.BASIC_SETS:
+        w = _rotvecs(acc.qsets[k])
+        extra = rng.normal(size=(len(w), cols - 3))
+        out[k] = A.as_dtype(np.concatenate([w, extra], axis=1), acc.dtype)
+    return out
+
+
+def se3_exp_errors(ev):
+    """Componentwise, against the 80-digit exp of the (rounded) coordinates."""
+    sets = _lie_sets(ev, 6)
+    errs = {}
+    for k, got in ev.run_sets(sets).items():
+        ref = []
+        for x in sets[k]:
+            R, V = _mp_so3(x[:3], "exp"), _mp_so3(x[:3], "jl")
+            ref.append(_transforms_one(R, V @ x[3:]))
+        errs[k] = np.abs(got - np.array(ref)).reshape(len(ref), -1).max(-1)
+    return errs
+
+
+def _transforms_one(R, t):
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T
+
+
+def se3_log_errors(ev):
+    """Backward error: the 80-digit exp of the returned coordinates against the input matrix
+    (near 180 degrees the direction of the log is ill-conditioned; its exp is not)."""
+    sets = {}
+    for k, x in _lie_sets(ev, 6).items():
+        sets[k] = A.as_dtype(
+            np.stack([_transforms_one(_mp_so3(r[:3], "exp"), r[3:]) for r in x]), ev.acc.dtype
+        )
+    errs = {}
+    for k, got in ev.run_sets(sets).items():
+        back = np.stack(
+            [_transforms_one(_mp_so3(g[:3], "exp"), _mp_so3(g[:3], "jl") @ g[3:]) for g in got]
+        )
+        errs[k] = np.abs(back - sets[k]).reshape(len(got), -1).max(-1)
+    return errs
+
+
+def rigid_apply_errors(ev):
+    """Componentwise, against R(q) v + t of the (rounded) inputs at 40 digits."""
+    acc = ev.acc
+    rng = np.random.default_rng(36)
+    sets = {
+        k: A.as_dtype(
+            np.concatenate([acc.qsets[k], rng.normal(size=(len(acc.qsets[k]), 6))], 1), acc.dtype
+        )
+        for k in A.BASIC_SETS
+    }
+    errs = {}
+    for k, got in ev.run_sets(sets).items():
+        ref = []
+        for x in sets[k]:
+            R = A.mp_quat_to_matrix(x[:4])
+            ref.append(
+                [float(sum(R[i][j] * x[7 + j] for j in range(3)) + x[4 + i]) for i in range(3)]
+            )
+        errs[k] = np.abs(got - np.array(ref)).max(-1)
+    return errs
+
+
+def so3_right_jacobian_errors(ev):
+    sets = {k: v[:, :3] for k, v in _lie_sets(ev, 3).items()}
+    return {
+        k: np.abs(got - np.stack([_mp_so3(w, "jr") for w in sets[k]])).reshape(len(got), -1).max(-1)
+        for k, got in ev.run_sets(sets).items()
+    }
+
+
+def jlog_errors(ev):
+    """Componentwise, against Jr^-1 of the log (angle in [0, pi]) of the (rounded) quaternion."""
+    acc = ev.acc
+    sets = {k: acc.qsets[k] for k in A.BASIC_SETS}
+    return {
+        k: np.abs(got - np.stack([_mp_so3(w, "jr_inv") for w in _mp_rotvecs(sets[k])]))
+        .reshape(len(got), -1)
+        .max(-1)
+        for k, got in ev.run_sets(sets).items()
+    }
+
+
+def _mp_rotvecs(qs):
+    """Rotation vectors (angle in [0, pi]) of quaternions, at 40 digits, as float lists."""
+    mp = A.mpmath40()
+    out = []
+    for q in qs:
+        x, y, z, w = (mp.mpf(float(c)) for c in q)
+        if w < 0:
+            x, y, z, w = -x, -y, -z, -w
+        n = mp.sqrt(x * x + y * y + z * z)
+        s = 2 * mp.atan2(n, w) / n if n != 0 else 2 / w
+        out.append([float(s * c) for c in (x, y, z)])
+    return out
+
+
+CASES.update(
+    {
+        c.op: c
+        for c in [
+            Case(
+                "se3_exp",
+                "exp_coords",
+                _se3_exp_contenders,
+                se3_exp_errors,
+                jaxlie=_jaxlie_se3(lambda SE3, x: SE3.exp(x).wxyz_xyz, _roll3),
+            ),
+            Case(
+                "se3_log",
+                "transform",
+                _se3_log_contenders,
+                se3_log_errors,
+                jaxlie=_jaxlie_se3(lambda SE3, T: SE3.from_matrix(T).log(), _same),
+            ),
+            Case(
+                "rigid_apply",
+                "pose_point",
+                _rigid_apply_contenders,
+                rigid_apply_errors,
+                jaxlie=_jaxlie_se3(lambda SE3, x: SE3(x[:7]).apply(x[7:]), _wxyz_xyz_point),
+            ),
+            Case("so3_right_jacobian", "rotvec", _so3_jr_contenders, so3_right_jacobian_errors),
+            Case("so3_jlog", "quaternion", _jlog_contenders, jlog_errors),
+        ]
+    }
+)

@@ -1,0 +1,608 @@
+"""Lie calculus of SO(3) and SE(3): hat and vee, the Jacobians of the exponential map, and the
+exponential, logarithm and adjoint of rigid transforms.
+
+Tangent vectors of SE(3) are scipy's exponential coordinates `xi = [rotvec, v]` (rotation
+first); transforms are `(..., 4, 4)` homogeneous matrices `[[R, t], [0, 1]]` acting on column
+vectors. Every coefficient that is a ratio of vanishing quantities at the zero rotation
+(`(t - sin t) / t^3` and its kind) is a power series in `t^2` below `t^2 = 1`, summed to
+rounding for the dtype, and the closed form above it, where its cancellation costs at most a
+few ulps: values and derivatives of every order are finite and accurate at 0, at `1e-300` and
+up to pi.
+"""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
+
+from . import _numerics as nm
+from ._matrix import _from_matrix
+from ._numerics import as_float, check_shape, eps, matmul, public
+from ._quaternion import _prescaled
+from ._rotvec import _exp_coeffs
+
+# --- power series in x = t^2 ------------------------------------------------------------------
+
+# Below this t^2 a coefficient is its series; at and above it, its closed form.
+_CUT = 1.0
+
+
+def _bernoulli(n: int) -> list[Fraction]:
+    """Bernoulli numbers ``B_0 .. B_n`` (``B_1 = -1/2``), exact."""
+    b = [Fraction(1)]
+    for m in range(1, n + 1):
+        b.append(-sum(math.comb(m + 1, k) * b[k] for k in range(m)) / (m + 1))
+    return b
+
+
+_B = _bernoulli(40)
+_N = 20  # terms generated; each dtype keeps as many as it needs at t^2 = _CUT
+
+# (t - sin t) / t^3 = sum_k (-1)^k t^2k / (2k+3)!
+_SERIES_B = [Fraction((-1) ** k, math.factorial(2 * k + 3)) for k in range(_N)]
+# (t^2 + 2 cos t - 2) / (2 t^4) = sum_k (-1)^k t^2k / (2k+4)!
+_SERIES_D = [Fraction((-1) ** k, math.factorial(2 * k + 4)) for k in range(_N)]
+# (2t - 3 sin t + t cos t) / (2 t^5) = sum_k (-1)^k (k+1) t^2k / (2k+5)!
+_SERIES_F = [Fraction((-1) ** k * (k + 1), math.factorial(2 * k + 5)) for k in range(_N)]
+# (1 - (t/2) cot(t/2)) / t^2 = sum_k (-1)^k B_(2k+2) t^2k / (2k+2)!  (radius 2 pi)
+_SERIES_E = [(-1) ** k * _B[2 * k + 2] / math.factorial(2 * k + 2) for k in range(_N)]
+
+
+def _terms(series, dtype) -> list[float]:
+    """The leading terms of ``series`` whose sum at ``t^2 = _CUT`` is its value to a sixteenth
+    of an ulp (the first term left out, and every later one, is below that bound)."""
+    bound = eps(dtype) / 16 * abs(series[0])
+    n = next(
+        i
+        for i in range(len(series))
+        if all(abs(series[j]) * _CUT**j < bound for j in range(i, len(series)))
+    )
+    return [float(c) for c in series[:n]]
+
+
+def _series(x, series, closed):
+    """A coefficient that is ``series`` in ``x = t^2`` below ``_CUT`` and ``closed(x)`` at and
+    above it. Both branches see a harmless argument where they are not taken (double where), so
+    neither sends inf or NaN into the derivatives."""
+    small = x < _CUT
+    xs = jnp.where(small, x, 0.0)
+    out = 0.0
+    for c in reversed(_terms(series, x.dtype)):  # Horner
+        out = out * xs + c
+    return jnp.where(small, out, closed(jnp.where(small, _CUT, x)))
+
+
+def _b_coeff(x, k, c):
+    """``(t - sin t) / t^3`` for ``x = t^2``, given ``k = sin(t/2)/t`` and ``c = cos(t/2)``."""
+    return _series(x, _SERIES_B, lambda xb: (1 - 2 * k * c) / xb)
+
+
+# --- building blocks ----------------------------------------------------------------------
+
+
+def _combo(alpha, beta, gamma, p):
+    """``alpha I + beta hat(p) + gamma p p^T``, shape ``(..., 3, 3)``, elementwise (every SO(3)
+    Jacobian has this form, since ``hat(p)^2 = p p^T - |p|^2 I``)."""
+    x, y, z = (p[..., i] for i in range(3))
+    rows = (
+        (alpha + gamma * x * x, -beta * z + gamma * x * y, beta * y + gamma * x * z),
+        (beta * z + gamma * y * x, alpha + gamma * y * y, -beta * x + gamma * y * z),
+        (-beta * y + gamma * z * x, beta * x + gamma * z * y, alpha + gamma * z * z),
+    )
+    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def _combo_apply(alpha, beta, gamma, p, u):
+    """``(alpha I + beta hat(p) + gamma p p^T) @ u`` without forming the matrix."""
+    pu = jnp.sum(p * u, axis=-1)
+    return alpha[..., None] * u + beta[..., None] * nm.cross(p, u) + (gamma * pu)[..., None] * p
+
+
+def _so3_coeffs(p):
+    """``(x, k, c, a, b)`` of a rotation vector: ``x = t^2``, ``k = sin(t/2)/t``,
+    ``c = cos(t/2)``, ``a = (1 - cos t)/t^2``, ``b = (t - sin t)/t^3``."""
+    x = jnp.sum(p * p, axis=-1)
+    k, c = _exp_coeffs(x)
+    return x, k, c, 2 * k * k, _b_coeff(x, k, c)
+
+
+def _inv_coeffs(p):
+    """``(g, e)`` of the inverse Jacobians: ``g = (t/2) cot(t/2)`` and ``e = (1 - g) / t^2``."""
+    x = jnp.sum(p * p, axis=-1)
+    k, c = _exp_coeffs(x)
+    g = c / (2 * k)
+    return g, _series(x, _SERIES_E, lambda xb: (1 - g) / xb)
+
+
+def _left(p):
+    """SO(3) left Jacobian of ``p`` as ``(alpha, beta, gamma)`` of :func:`_combo`."""
+    x, k, c, a, b = _so3_coeffs(p)
+    return 2 * k * c, a, b  # alpha = 1 - b t^2 = sin(t)/t
+
+
+def _blocks(tl, bl, br):
+    """The 6x6 block lower-triangular matrix ``[[tl, 0], [bl, br]]``."""
+    top = jnp.concatenate([tl, jnp.zeros_like(tl)], axis=-1)
+    return jnp.concatenate([top, jnp.concatenate([bl, br], axis=-1)], axis=-2)
+
+
+def _split_xi(xi):
+    return xi[..., :3], xi[..., 3:]
+
+
+def _q_matrix(p, r):
+    """The bottom-left block ``Q(p, r)`` of the SE(3) left Jacobian of ``xi = [p, r]``:
+    ``Q = 1/2 R + b (P R + R P + P R P) + d (P P R + R P P - 3 P R P)
+    + f (P R P P + P P R P)``, with ``P = hat(p)``, ``R = hat(r)``, ``b = (t - sin t)/t^3``,
+    ``d = (t^2 + 2 cos t - 2)/(2 t^4)`` and ``f = (2t - 3 sin t + t cos t)/(2 t^5)``."""
+    x, k, c, a, b = _so3_coeffs(p)
+    d = _series(x, _SERIES_D, lambda xb: (1 - 4 * k * k) / (2 * xb))
+    # 2 - 3 sin t / t + cos t, with sin t / t = 2 k c and cos t = c^2 - (k t)^2.
+    f = _series(x, _SERIES_F, lambda xb: (2 - 6 * k * c + c * c - k * k * xb) / (2 * xb * xb))
+    P, R = nm.hat(p), nm.hat(r)
+    PR, RP = matmul(P, R), matmul(R, P)
+    PRP = matmul(PR, P)
+    PPR, RPP = matmul(P, PR), matmul(RP, P)
+    PRPP, PPRP = matmul(PRP, P), matmul(P, PRP)
+
+    def s(v):
+        return v[..., None, None]
+
+    return 0.5 * R + s(b) * (PR + RP + PRP) + s(d) * (PPR + RPP - 3 * PRP) + s(f) * (PRPP + PPRP)
+
+
+# --- public functions ---------------------------------------------------------------------
+
+
+@public
+def hat(v: ArrayLike) -> Array:
+    """The matrix of a tangent vector: `so(3)` for 3-vectors, `se(3)` for 6-vectors.
+
+    Args:
+        v: `(..., 3)` vector `w`, or `(..., 6)` exponential coordinates `[w, v]` (rotation
+            first).
+
+    Returns:
+        `(..., 3, 3)` skew-symmetric `[w]x` with `hat(w) @ u == cross(w, u)`, or `(..., 4, 4)`
+            twist `[[hat(w), v], [0, 0]]`, whose matrix exponential is
+            [`se3_exp`][rotjax.se3_exp].
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.hat([1.0, 2.0, 3.0]))
+        # [[ 0. -3.  2.]
+        #  [ 3.  0. -1.]
+        #  [-2.  1.  0.]]
+        print(rj.hat([0.0, 0.0, 1.0, 4.0, 5.0, 6.0]))
+        # [[ 0. -1.  0.  4.]
+        #  [ 1.  0. -0.  5.]
+        #  [-0.  0.  0.  6.]
+        #  [ 0.  0.  0.  0.]]
+        ```
+    """
+    (v,), dt = as_float(v)
+    if v.ndim < 1 or v.shape[-1] not in (3, 6):
+        raise ValueError(f"v: expected shape (..., 3) or (..., 6), got {tuple(v.shape)}")
+    if v.shape[-1] == 3:
+        return nm.hat(v).astype(dt)
+    top = jnp.concatenate([nm.hat(v[..., :3]), v[..., 3:, None]], axis=-1)
+    out = jnp.concatenate([top, jnp.zeros_like(top[..., :1, :])], axis=-2)
+    return out.astype(dt)
+
+
+@public
+def vee(M: ArrayLike) -> Array:
+    """Inverse of [`hat`][rotjax.hat]: the vector of an `so(3)` or `se(3)` matrix.
+
+    Args:
+        M: `(..., 3, 3)` matrix, or `(..., 4, 4)` twist `[[W, v], [*, *]]`.
+
+    Returns:
+        `(..., 3)` vector of the antisymmetric part, `(M - M^T) / 2` (so `vee(hat(w)) == w`
+            and a symmetric part is ignored), or `(..., 6)` `[vee(W), v]`; the bottom row of a
+            4x4 matrix is not read.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.vee(rj.hat([1.0, 2.0, 3.0])))
+        # [1. 2. 3.]
+        print(rj.vee(rj.hat([0.0, 0.0, 1.0, 4.0, 5.0, 6.0])))
+        # [0. 0. 1. 4. 5. 6.]
+        ```
+    """
+    (M,), dt = as_float(M)
+    if M.ndim < 2 or M.shape[-2:] not in ((3, 3), (4, 4)):
+        raise ValueError(f"M: expected shape (..., 3, 3) or (..., 4, 4), got {tuple(M.shape)}")
+    w = nm.vee(M[..., :3, :3])
+    if M.shape[-1] == 4:
+        w = jnp.concatenate([w, M[..., :3, 3]], axis=-1)
+    return w.astype(dt)
+
+
+@public
+def so3_left_jacobian(rotvec: ArrayLike) -> Array:
+    """Left Jacobian of the SO(3) exponential: `exp(p + d) = exp(Jl(p) d) exp(p)` to first order
+    in `d`.
+
+    Args:
+        rotvec: `(..., 3)` rotation vector `p` (any angle).
+
+    Returns:
+        `(..., 3, 3)` `Jl = I + (1 - cos t)/t^2 P + (t - sin t)/t^3 P^2`, `P = hat(p)`,
+            `t = |p|`. It is also the matrix `V` that maps `v` to the translation in
+            [`se3_exp`][rotjax.se3_exp], and `Jl(p) = R(p) Jr(p)`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        print(rj.so3_left_jacobian([0.0, 0.0, jnp.pi / 2]).round(3))
+        # [[ 0.637 -0.637  0.   ]
+        #  [ 0.637  0.637  0.   ]
+        #  [ 0.     0.     1.   ]]
+        ```
+    """
+    (p,), dt = as_float(rotvec)
+    check_shape(p, (3,), "rotvec")
+    return _combo(*_left(p), p).astype(dt)
+
+
+@public
+def so3_right_jacobian(rotvec: ArrayLike) -> Array:
+    """Right Jacobian of the SO(3) exponential: `exp(p + d) = exp(p) exp(Jr(p) d)` to first order
+    in `d`.
+
+    Args:
+        rotvec: `(..., 3)` rotation vector `p` (any angle).
+
+    Returns:
+        `(..., 3, 3)` `Jr = Jl(-p) = Jl(p)^T = I - (1 - cos t)/t^2 P + (t - sin t)/t^3 P^2`.
+            In the body frame, the angular velocity of `exp(p(s))` is `Jr(p) dp/ds`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        p = jnp.array([0.0, 0.0, jnp.pi / 2])
+        print(rj.so3_right_jacobian(p).round(3))
+        # [[ 0.637  0.637  0.   ]
+        #  [-0.637  0.637  0.   ]
+        #  [ 0.     0.     1.   ]]
+        print(jnp.allclose(rj.so3_right_jacobian(p), rj.so3_left_jacobian(p).T))
+        # True
+        ```
+    """
+    (p,), dt = as_float(rotvec)
+    check_shape(p, (3,), "rotvec")
+    alpha, a, b = _left(p)
+    return _combo(alpha, -a, b, p).astype(dt)
+
+
+@public
+def so3_left_jacobian_inverse(rotvec: ArrayLike) -> Array:
+    """Inverse of [`so3_left_jacobian`][rotjax.so3_left_jacobian].
+
+    Args:
+        rotvec: `(..., 3)` rotation vector `p`; the inverse exists for angles other than
+            non-zero multiples of 2 pi (the logarithm's angles, `[0, pi]`, are all fine).
+
+    Returns:
+        `(..., 3, 3)` `Jl^-1 = I - P/2 + (1 - (t/2) cot(t/2))/t^2 P^2`: the derivative of
+            `log(exp(d) exp(p))` in `d` at 0.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        p = jnp.array([0.3, -0.2, 1.0])
+        J = rj.so3_left_jacobian(p)
+        print(jnp.allclose(rj.so3_left_jacobian_inverse(p) @ J, jnp.eye(3), atol=1e-6))
+        # True
+        ```
+    """
+    (p,), dt = as_float(rotvec)
+    check_shape(p, (3,), "rotvec")
+    g, e = _inv_coeffs(p)
+    return _combo(g, jnp.full_like(g, -0.5), e, p).astype(dt)
+
+
+@public
+def so3_right_jacobian_inverse(rotvec: ArrayLike) -> Array:
+    """Inverse of [`so3_right_jacobian`][rotjax.so3_right_jacobian].
+
+    Args:
+        rotvec: `(..., 3)` rotation vector `p` (angle not a non-zero multiple of 2 pi).
+
+    Returns:
+        `(..., 3, 3)` `Jr^-1 = I + P/2 + (1 - (t/2) cot(t/2))/t^2 P^2`: the derivative of
+            `log(exp(p) exp(d))` in `d` at 0.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        p = jnp.array([0.3, -0.2, 1.0])
+        J = rj.so3_right_jacobian(p)
+        print(jnp.allclose(rj.so3_right_jacobian_inverse(p) @ J, jnp.eye(3), atol=1e-6))
+        # True
+        ```
+    """
+    (p,), dt = as_float(rotvec)
+    check_shape(p, (3,), "rotvec")
+    g, e = _inv_coeffs(p)
+    return _combo(g, jnp.full_like(g, 0.5), e, p).astype(dt)
+
+
+def _exp(xi):
+    """``(R, t)`` of ``exp([p, r])``: ``R = exp(p)``, ``t = Jl(p) r``."""
+    p, r = _split_xi(xi)
+    x, k, c, a, b = _so3_coeffs(p)
+    # R = cos t I + sin t / t P + (1 - cos t)/t^2 p p^T, cos t = c^2 - (k t)^2.
+    R = _combo(c * c - k * k * x, 2 * k * c, a, p)
+    return R, _combo_apply(2 * k * c, a, b, p, r)
+
+
+def _homogeneous(R, t):
+    top = jnp.concatenate([R, t[..., None]], axis=-1)
+    bottom = jnp.concatenate([jnp.zeros_like(t), jnp.ones_like(t[..., :1])], axis=-1)
+    return jnp.concatenate([top, bottom[..., None, :]], axis=-2)
+
+
+@public
+def se3_exp(xi: ArrayLike) -> Array:
+    """Exponential map of SE(3): exponential coordinates to a 4x4 rigid transform.
+
+    Args:
+        xi: `(..., 6)` exponential coordinates `[p, v]`, scipy's order (rotation vector
+            first), so that `se3_exp(xi)` is `RigidTransform.from_exp_coords(xi).as_matrix()`
+            and the matrix exponential of `hat(xi)`.
+
+    Returns:
+        `(..., 4, 4)` `[[R, t], [0, 1]]` with `R = exp(hat(p))` and `t = Jl(p) v`
+            ([`so3_left_jacobian`][rotjax.so3_left_jacobian]).
+
+    Note:
+        Exact derivatives of every order at `p = 0` (the coefficients are series in `|p|^2`
+        there, see the module notes).
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        # a quarter turn about z while moving 1 along x: a screw motion
+        T = rj.se3_exp(jnp.array([0.0, 0.0, jnp.pi / 2, 1.0, 0.0, 0.0]))
+        print(T.round(3))
+        # [[-0.    -1.     0.     0.637]
+        #  [ 1.    -0.     0.     0.637]
+        #  [ 0.     0.     1.     0.   ]
+        #  [ 0.     0.     0.     1.   ]]
+        ```
+    """
+    (xi,), dt = as_float(xi)
+    check_shape(xi, (6,), "xi")
+    return _homogeneous(*_exp(xi)).astype(dt)
+
+
+def _log(R, t):
+    """``[p, Jl(p)^-1 t]`` with ``p = log(R)``, angle in ``[0, pi]``."""
+    q = _prescaled(_from_matrix(R, "shepperd"))
+    q = jnp.where(q[..., 3:] < 0, -q, q)
+    qv, w = q[..., :3], q[..., 3]
+    n2 = jnp.sum(qv * qv, axis=-1)
+    w2 = w * w
+    # k = 2 atan2(n, w) / n (p = k qv), its Taylor series in (n/w)^2 near the identity, as in
+    # quaternion_to_rotvec.
+    small = n2 < eps(q.dtype) ** 0.5 * w2
+    n = jnp.sqrt(jnp.where(small, 1.0, n2))
+    u = n2 / jnp.where(small, w2, 1.0)
+    wsafe = jnp.where(small, w, 1.0)
+    k = jnp.where(small, (2 - 2 * u / 3 + 2 * u * u / 5) / wsafe, 2 * jnp.arctan2(n, w) / n)
+    k = jnp.where(n2 + w2 == 0, jnp.nan, k)
+    p = k[..., None] * qv
+    x = jnp.sum(p * p, axis=-1)
+    # (t/2) cot(t/2) = (t/2) w / n = k w / 2 (scale free: k scales as 1/|q|, w as |q|).
+    g = k * w / 2
+    e = _series(x, _SERIES_E, lambda xb: (1 - g) / xb)
+    return jnp.concatenate([p, _combo_apply(g, jnp.full_like(g, -0.5), e, p, t)], axis=-1)
+
+
+@public
+def se3_log(T: ArrayLike) -> Array:
+    """Logarithm map of SE(3): a 4x4 rigid transform to its exponential coordinates.
+
+    Args:
+        T: `(..., 4, 4)` homogeneous transform `[[R, t], [0, 1]]` (the bottom row is not
+            read).
+
+    Returns:
+        `(..., 6)` `[p, v]` with `p` the rotation vector of `R` (angle in `[0, pi]`) and
+            `v = Jl(p)^-1 t`, so that `se3_exp(se3_log(T)) == T` to rounding, at and near 180
+            degrees too.
+
+    Note:
+        `p` is [`matrix_to_rotvec`][rotjax.matrix_to_rotvec]'s (through the quaternion, exact
+        near 180 degrees); the derivatives are finite everywhere and exact at the identity. At
+        exactly 180 degrees the log jumps between `p` and `-p` (the cut of the map).
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        xi = jnp.array([0.0, 0.0, jnp.pi / 2, 1.0, 0.0, 0.0])
+        print(rj.se3_log(rj.se3_exp(xi)).round(6))
+        # [ 0.        0.        1.570796  1.       -0.        0.      ]
+        ```
+    """
+    (T,), dt = as_float(T)
+    check_shape(T, (4, 4), "T")
+    return _log(T[..., :3, :3], T[..., :3, 3]).astype(dt)
+
+
+@public
+def se3_adjoint(T: ArrayLike) -> Array:
+    """Adjoint matrix of a rigid transform, in the `[rotation, translation]` order.
+
+    Args:
+        T: `(..., 4, 4)` homogeneous transform `[[R, t], [0, 1]]`.
+
+    Returns:
+        `(..., 6, 6)` `Ad_T = [[R, 0], [hat(t) R, R]]`, with
+            `se3_exp(Ad_T @ xi) == T @ se3_exp(xi) @ inv(T)`. A covariance `S` of a right
+            perturbation `T exp(d)` is `Ad_T S Ad_T^T` as a left one, `exp(d') T`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        T = rj.se3_exp(jnp.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0]))
+        xi = jnp.array([0.3, -0.1, 0.2, 0.5, 0.0, -0.4])
+        lhs = rj.se3_exp(rj.se3_adjoint(T) @ xi)
+        print(jnp.allclose(lhs, T @ rj.se3_exp(xi) @ jnp.linalg.inv(T), atol=1e-5))
+        # True
+        ```
+    """
+    (T,), dt = as_float(T)
+    check_shape(T, (4, 4), "T")
+    R, t = T[..., :3, :3], T[..., :3, 3]
+    return _blocks(R, matmul(nm.hat(t), R), R).astype(dt)
+
+
+@public
+def se3_left_jacobian(xi: ArrayLike) -> Array:
+    """Left Jacobian of the SE(3) exponential: `exp(xi + d) = exp(Jl(xi) d) exp(xi)` to first
+    order in `d`.
+
+    Args:
+        xi: `(..., 6)` exponential coordinates `[p, v]` (rotation first).
+
+    Returns:
+        `(..., 6, 6)` `[[Jl(p), 0], [Q(p, v), Jl(p)]]` in the same order, with `Jl(p)` the
+            SO(3) left Jacobian and `Q` the coupling block of Barfoot's *State Estimation for
+            Robotics* (his `[v, p]` order swapped): with `P = hat(p)`, `V = hat(v)` and
+            `t = |p|`, `Q = V/2 + (t - sin t)/t^3 (PV + VP + PVP)
+            + (t^2 + 2 cos t - 2)/(2 t^4) (PPV + VPP - 3 PVP)
+            + (2t - 3 sin t + t cos t)/(2 t^5) (PVPP + PPVP)`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        # at zero rotation: [[I, 0], [hat(v) / 2, I]]
+        J = rj.se3_left_jacobian(jnp.array([0.0, 0.0, 0.0, 2.0, 0.0, 0.0]))
+        print(J[3:, :3])
+        # [[ 0.  0.  0.]
+        #  [ 0.  0. -1.]
+        #  [ 0.  1.  0.]]
+        ```
+    """
+    (xi,), dt = as_float(xi)
+    check_shape(xi, (6,), "xi")
+    p, r = _split_xi(xi)
+    J = _combo(*_left(p), p)
+    return _blocks(J, _q_matrix(p, r), J).astype(dt)
+
+
+@public
+def se3_right_jacobian(xi: ArrayLike) -> Array:
+    """Right Jacobian of the SE(3) exponential: `exp(xi + d) = exp(xi) exp(Jr(xi) d)` to first
+    order in `d`.
+
+    Args:
+        xi: `(..., 6)` exponential coordinates `[p, v]` (rotation first).
+
+    Returns:
+        `(..., 6, 6)` `Jr(xi) = Jl(-xi)`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        xi = jnp.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0])
+        print(jnp.allclose(rj.se3_right_jacobian(xi), rj.se3_left_jacobian(-xi)))
+        # True
+        ```
+    """
+    (xi,), dt = as_float(xi)
+    check_shape(xi, (6,), "xi")
+    p, r = _split_xi(-xi)
+    J = _combo(*_left(p), p)
+    return _blocks(J, _q_matrix(p, r), J).astype(dt)
+
+
+def _left_inverse(p, r):
+    g, e = _inv_coeffs(p)
+    Ji = _combo(g, jnp.full_like(g, -0.5), e, p)
+    return _blocks(Ji, -matmul(matmul(Ji, _q_matrix(p, r)), Ji), Ji)
+
+
+@public
+def se3_left_jacobian_inverse(xi: ArrayLike) -> Array:
+    """Inverse of [`se3_left_jacobian`][rotjax.se3_left_jacobian]: the derivative of
+    `log(exp(d) exp(xi))` in `d` at 0.
+
+    Args:
+        xi: `(..., 6)` exponential coordinates `[p, v]`; rotation angle not a non-zero
+            multiple of 2 pi.
+
+    Returns:
+        `(..., 6, 6)` `[[Jl^-1, 0], [-Jl^-1 Q Jl^-1, Jl^-1]]`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        xi = jnp.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0])
+        J, Ji = rj.se3_left_jacobian(xi), rj.se3_left_jacobian_inverse(xi)
+        print(jnp.allclose(Ji @ J, jnp.eye(6), atol=1e-5))
+        # True
+        ```
+    """
+    (xi,), dt = as_float(xi)
+    check_shape(xi, (6,), "xi")
+    return _left_inverse(*_split_xi(xi)).astype(dt)
+
+
+@public
+def se3_right_jacobian_inverse(xi: ArrayLike) -> Array:
+    """Inverse of [`se3_right_jacobian`][rotjax.se3_right_jacobian]: the derivative of
+    `log(exp(xi) exp(d))` in `d` at 0.
+
+    Args:
+        xi: `(..., 6)` exponential coordinates `[p, v]`; rotation angle not a non-zero
+            multiple of 2 pi.
+
+    Returns:
+        `(..., 6, 6)` `Jr(xi)^-1 = Jl(-xi)^-1`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        xi = jnp.array([0.1, 0.2, 0.3, 1.0, 2.0, 3.0])
+        J, Ji = rj.se3_right_jacobian(xi), rj.se3_right_jacobian_inverse(xi)
+        print(jnp.allclose(Ji @ J, jnp.eye(6), atol=1e-5))
+        # True
+        ```
+    """
+    (xi,), dt = as_float(xi)
+    check_shape(xi, (6,), "xi")
+    return _left_inverse(*_split_xi(-xi)).astype(dt)
