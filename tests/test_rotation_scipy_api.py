@@ -77,3 +77,53 @@ def test_random_state_matches_scipy_legacy_stream():
     # a JAX key in either place
     k = jax.random.key(1)
     np.testing.assert_array_equal(Rotation.random(k, 3).as_quat(), Rotation.random(3, k).as_quat())
+
+
+def test_identity_and_random_shape_validation():
+    assert Rotation.identity(shape=()).as_quat().shape == (4,)
+    assert Rotation.identity(shape=5).as_quat().shape == (5, 4)
+    assert Rotation.random(shape=(2, 3), rng=0).as_quat().shape == (2, 3, 4)
+    np.testing.assert_array_equal(
+        Rotation.identity(shape=(2, 2)).as_quat().reshape(-1, 4), np.tile([0.0, 0, 0, 1], (4, 1))
+    )
+    for f in (Rotation.identity, Rotation.random):
+        with pytest.raises(ValueError, match="`shape` must be an int or a tuple of ints"):
+            f(shape=2.5)
+        with pytest.raises(ValueError, match="Only one of `num` or `shape`"):
+            f(num=3, shape=(2, 2))
+    with pytest.raises(TypeError, match="takes from 0 to 1 positional arguments"):
+        Rotation.identity(3, 3)
+    assert Rotation.identity(3, jnp.float32).as_quat().dtype == jnp.float32  # jax.scipy's form
+
+
+@pytest.mark.parametrize("xp", [np, jnp])
+def test_empty_batches_construct(xp):
+    z3, z4 = xp.zeros((0, 3)), xp.zeros((0, 4))
+    built = [
+        Rotation.random(num=0),
+        Rotation.identity(num=0),
+        Rotation.random(num=3, rng=0)[[]],
+        Rotation.from_quat(z4),
+        Rotation.from_matrix(xp.zeros((0, 3, 3))),
+        Rotation.from_matrix(xp.zeros((0, 3, 3)), assume_valid=True),
+        Rotation.from_euler("xyz", z3),
+        Rotation.from_rotvec(z3),
+        Rotation.from_davenport(xp.eye(3), "extrinsic", z3),
+        Rotation.from_mrp(z3),
+    ]
+    for r in built:
+        assert len(r) == 0 and r.as_matrix().shape == (0, 3, 3)
+
+
+def test_constant_attitude_spline_has_exactly_zero_rates():
+    from rotjax import RotationSpline
+
+    spline = RotationSpline(np.arange(10.0), Rotation.from_rotvec(np.ones((10, 3))))
+    t = np.linspace(-1, 11)
+    for order in (1, 2):
+        np.testing.assert_array_equal(spline(t, order), 0)
+    np.testing.assert_allclose(spline(t).as_rotvec(), 1, rtol=1e-15)
+    # the keyframes' derivative is kept where they are equal (not a silent zero)
+    q = Rotation.from_rotvec(np.ones((3, 3))).as_quat()
+    g = jax.grad(lambda q: RotationSpline(np.arange(3.0), Rotation.from_quat(q))(0.5, 1)[0])(q)
+    assert np.all(np.isfinite(g)) and np.any(g != 0)
