@@ -289,8 +289,8 @@ class Rotation:
         idx = self._index(indexer)
         if not isinstance(value, Rotation):
             raise TypeError("value must be a Rotation object")
-        q = self._quat
-        self._stored = q.at[idx].set(value.as_quat().astype(q.dtype))
+        q = jnp.asarray(self._stored)  # each row keeps its own norm: stored as given
+        self._stored = q.at[idx].set(jnp.asarray(value._stored, q.dtype))
 
     def __repr__(self) -> str:
         m = repr(np.asarray(self.as_matrix())).splitlines()
@@ -503,12 +503,13 @@ class Rotation:
     @staticmethod
     def concatenate(rotations) -> Rotation:
         """Concatenate rotations along the first batch axis (single ones count as one)."""
+        # The stored quaternions as they are (each keeps its norm), like indexing.
         if isinstance(rotations, Rotation):
-            return Rotation._raw(rotations._quat)
+            return Rotation._raw(jnp.asarray(rotations._stored))
         rotations = list(rotations)
         if not all(isinstance(r, Rotation) for r in rotations):
             raise TypeError("input must contain Rotation objects only")
-        return Rotation._raw(jnp.concatenate([jnp.atleast_2d(r._quat) for r in rotations]))
+        return Rotation._raw(jnp.concatenate([jnp.atleast_2d(r._stored) for r in rotations]))
 
     @classmethod
     def create_group(cls, group: str, axis: str = "Z") -> Rotation:
