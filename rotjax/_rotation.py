@@ -29,6 +29,9 @@ from ._matrix import matrix_to_quaternion
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
 from ._numerics import _check_array, _check_static, cross, matvec, safe_atan2, to_scalar_last
 from ._quaternion import (
+    _multiply,
+    _prescaled,
+    _renormalize,
     angle_between,
     quaternion_apply,
     quaternion_conjugate,
@@ -110,8 +113,10 @@ def _scalar_last(q, scalar_first):
 
 @jax.jit
 def _compose(p, q):
+    # The stored quaternions need not be unit: the product of the prescaled ones is of order
+    # 1, and normalising it gives the unit quaternion of the composition.
     p, q = _broadcast(p, q, trailing=(1, 1))
-    return quaternion_normalize(quaternion_multiply(p, q))
+    return _renormalize(_multiply(_prescaled(p), _prescaled(q)))
 
 
 @functools.partial(jax.jit, static_argnames="inverse")
@@ -123,6 +128,19 @@ def _apply(q, v, inverse):
 
 def _identity_quat(shape, dtype):
     return jnp.zeros((*shape, 4), dtype).at[..., 3].set(1)
+
+
+def _batch_shape(shape) -> tuple[int, ...]:
+    """scipy's ``shape`` argument (``None``, an int or a tuple of ints) as a tuple."""
+    if shape is None:
+        return ()
+    if isinstance(shape, (int, np.integer)) and not isinstance(shape, bool):
+        return (int(shape),)
+    if isinstance(shape, (tuple, list)) and all(
+        isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in shape
+    ):
+        return tuple(int(n) for n in shape)
+    raise ValueError("`shape` must be an int or a tuple of ints")
 
 
 def _is_key(x) -> bool:
@@ -162,11 +180,16 @@ class Rotation:
         scalar_first: ``quat`` is ``[w, x, y, z]``.
     """
 
-    # The leaf is the quaternion as given (scalar last): the readers (as_matrix, as_euler,
-    # apply, ...) accept any norm, so from_quat(q).as_euler(seq) compiles to exactly
-    # quaternion_to_euler(q, seq). ``_unit`` (static) says whether it is already unit; the
-    # other methods and as_quat read the normalised ``_quat``.
-    __slots__ = ("_stored", "_unit")
+    # The leaf is the quaternion as given (scalar last), of any non-zero norm: the readers
+    # (as_matrix, as_euler, apply, ...) accept any norm, so from_quat(q).as_euler(seq) compiles
+    # to exactly quaternion_to_euler(q, seq); as_quat and the methods that need a unit
+    # quaternion read the normalised ``_quat``. Nothing else is stored: the tree structure is
+    # the same for every constructor, method and operator (a scan carry, both branches of a
+    # cond), and the value alone decides the result.
+    __slots__ = ("_stored",)
+    # NumPy's operators defer to ours (``array * r`` is not an object-array product), and ours
+    # return NotImplemented for unknown operands, so another class's reflected operator runs.
+    __array_ufunc__ = None
 
     def __init__(self, quat, normalize: bool = True, copy: bool = True, scalar_first: bool = False):
         del copy  # JAX arrays are immutable: there is nothing to copy
@@ -184,40 +207,33 @@ class Rotation:
         if scalar_first:
             q = _scalar_last(q, scalar_first)
         self._stored = q
-        self._unit = not normalize
 
     # --- pytree -------------------------------------------------------------------------
 
     def tree_flatten(self):
-        return (self._stored,), self._unit
+        return (self._stored,), None
 
     @classmethod
     def tree_unflatten(cls, aux, children):
-        return cls._raw(children[0], aux)
+        return cls._raw(children[0])
 
     @classmethod
-    def _raw(cls, quat, unit: bool = True):
-        """A rotation holding ``quat`` as it is (no check); ``unit``: it is a unit quaternion
-        (else it is normalised where a method needs it)."""
+    def _raw(cls, quat):
+        """A rotation holding the quaternion ``quat`` (any non-zero norm) as it is."""
         r = object.__new__(cls)
         r._stored = quat
-        r._unit = unit
         return r
 
     @property
     def _quat(self):
         """The unit quaternion, scalar last."""
-        q = self._stored
-        if not self._unit:
-            return quaternion_normalize(q)
-        return q if isinstance(q, jax.Array) else jnp.asarray(q)  # (asarray is not free)
+        return quaternion_normalize(self._stored)
 
     def __getstate__(self):
-        return np.asarray(self._quat)
+        return np.asarray(self._stored)
 
     def __setstate__(self, state):
         self._stored = jnp.asarray(state)
-        self._unit = True
 
     # --- shape ---------------------------------------------------------------------------
 
@@ -248,7 +264,7 @@ class Rotation:
     def __iter__(self):
         if self.single:
             raise TypeError("Single rotation is not iterable.")
-        return (Rotation._raw(self._stored[i], self._unit) for i in range(len(self)))
+        return (Rotation._raw(self._stored[i]) for i in range(len(self)))
 
     def _index(self, indexer):
         if self.single:
@@ -261,7 +277,7 @@ class Rotation:
 
     def __getitem__(self, indexer) -> Rotation:
         """Rotations selected by ``indexer`` over the batch axes (as NumPy indexing)."""
-        return Rotation._raw(self._stored[self._index(indexer)], self._unit)
+        return Rotation._raw(self._stored[self._index(indexer)])
 
     def __setitem__(self, indexer, value: Rotation):
         """Replace the selected rotations by ``value``.
@@ -273,9 +289,8 @@ class Rotation:
         idx = self._index(indexer)
         if not isinstance(value, Rotation):
             raise TypeError("value must be a Rotation object")
-        q = self._quat
-        self._stored = q.at[idx].set(value.as_quat().astype(q.dtype))
-        self._unit = True
+        q = jnp.asarray(self._stored)  # each row keeps its own norm: stored as given
+        self._stored = q.at[idx].set(jnp.asarray(value._stored, q.dtype))
 
     def __repr__(self) -> str:
         m = repr(np.asarray(self.as_matrix())).splitlines()
@@ -310,6 +325,8 @@ class Rotation:
         m = _input(matrix)
         if m.ndim < 2 or m.shape[-2:] != (3, 3):
             raise ValueError(f"Expected `matrix` to have shape (..., 3, 3), got {m.shape}")
+        if m.size == 0:  # an empty batch (the nearest-rotation solver needs an element)
+            return Rotation._raw(jnp.zeros(m.shape[:-2] + (4,), m.dtype))
         if assume_valid:
             return Rotation._raw(matrix_to_quaternion(m, method="shepperd"))
         if isinstance(m, np.ndarray) and np.any(np.linalg.det(m) <= 0):
@@ -426,11 +443,21 @@ class Rotation:
             dtype: float dtype (jax.scipy's second argument); JAX's default float if ``None``.
             shape: batch shape, instead of ``num``.
         """
+        if dtype is not None:
+            try:
+                floating = jnp.issubdtype(dtype, jnp.floating)
+            except TypeError:
+                floating = False
+            if not floating:
+                raise TypeError(
+                    "identity() takes from 0 to 1 positional arguments (a second one is "
+                    f"jax.scipy's float dtype), got {dtype!r}"
+                )
         if num is not None and shape is not None:
             raise ValueError("Only one of `num` or `shape` can be specified.")
         if num is not None:
             shape = (num,)
-        shape = () if shape is None else ((shape,) if isinstance(shape, int) else tuple(shape))
+        shape = _batch_shape(shape)
         return Rotation._raw(_identity_quat(shape, dtype if dtype is not None else float))
 
     @staticmethod
@@ -443,40 +470,46 @@ class Rotation:
             rng: a ``numpy.random.Generator``, a seed for ``numpy.random.default_rng``, or a
                 JAX PRNG key. With NumPy, the samples equal scipy's for the same generator.
             shape: batch shape, instead of ``num``.
-            random_state: scipy's former name of ``rng``.
+            random_state: scipy's former name of ``rng``, with its legacy meaning: a seed
+                seeds a ``numpy.random.RandomState``, which is used as it is; so is a
+                ``RandomState`` or a ``Generator``. With neither ``rng`` nor
+                ``random_state``, NumPy's global ``RandomState`` draws (as scipy's).
         """
-        if rng is None:
+        if rng is not None and random_state is not None:
+            raise TypeError(
+                "random() got multiple values for argument now known as `rng`. Specify one "
+                "of `rng` or `random_state`."
+            )
+        legacy = rng is None  # scipy's check_random_state: a seed seeds a RandomState
+        if legacy:
             rng = random_state
         if _is_key(num):
             num, rng = rng, num
         if num is not None and shape is not None:
             raise ValueError("Only one of `num` or `shape` can be specified.")
-        if shape is not None and not (
-            isinstance(shape, int)
-            or all(isinstance(s, (int, np.integer)) for s in np.atleast_1d(shape))
-        ):
-            raise ValueError("`shape` must be an int or a tuple of ints")
-        size = (
-            (num,)
-            if num is not None
-            else (() if shape is None else ((shape,) if isinstance(shape, int) else tuple(shape)))
-        )
+        size = (num,) if num is not None else _batch_shape(shape)
         if _is_key(rng):
             sample = jax.random.normal(rng, (*size, 4), dtype=float)
         else:
-            gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+            if isinstance(rng, (np.random.Generator, np.random.RandomState)):
+                gen = rng
+            elif legacy:
+                gen = np.random.mtrand._rand if rng is None else np.random.RandomState(rng)
+            else:
+                gen = np.random.default_rng(rng)
             sample = gen.normal(size=(*size, 4))
         return Rotation(sample)
 
     @staticmethod
     def concatenate(rotations) -> Rotation:
         """Concatenate rotations along the first batch axis (single ones count as one)."""
+        # The stored quaternions as they are (each keeps its norm), like indexing.
         if isinstance(rotations, Rotation):
-            return Rotation._raw(rotations._quat)
+            return Rotation._raw(jnp.asarray(rotations._stored))
         rotations = list(rotations)
         if not all(isinstance(r, Rotation) for r in rotations):
             raise TypeError("input must contain Rotation objects only")
-        return Rotation._raw(jnp.concatenate([jnp.atleast_2d(r._quat) for r in rotations]))
+        return Rotation._raw(jnp.concatenate([jnp.atleast_2d(r._stored) for r in rotations]))
 
     @classmethod
     def create_group(cls, group: str, axis: str = "Z") -> Rotation:
@@ -642,7 +675,7 @@ class Rotation:
                 f"Cannot broadcast {np_shapes[0]} rotations in first to {np_shapes[1]} "
                 "rotations in second object."
             ) from None
-        return Rotation._raw(_compose(self._quat, other._quat))
+        return Rotation._raw(_compose(self._stored, other._stored))
 
     def __pow__(self, n, modulus=None) -> Rotation:
         """Fractional power: ``n`` times the rotation angle about the same axis.
@@ -663,7 +696,7 @@ class Rotation:
 
     def inv(self) -> Rotation:
         """The inverse rotation(s)."""
-        return Rotation._raw(quaternion_conjugate(self._stored), self._unit)
+        return Rotation._raw(quaternion_conjugate(self._stored))
 
     def apply(self, vectors, inverse: bool = False):
         """Rotate vectors: ``R @ v`` (``R.T @ v`` with ``inverse``).
@@ -693,14 +726,24 @@ class Rotation:
         return rotation_angle(self._stored)
 
     def approx_equal(self, other: Rotation, atol=None, degrees: bool = False):
-        """Whether the angle between the rotations is below ``atol`` (default 1e-8 rad)."""
+        """Whether the angle between the rotations is below ``atol``.
+
+        Args:
+            other: rotations whose batch shape broadcasts with ``shape``.
+            atol: the angle (radians, or degrees with ``degrees``). Default: scipy's 1e-8 rad
+                in float64, scaled with the square root of the machine epsilon in lower
+                precision (``1e-8 * sqrt(eps / eps_float64)``: about 2.3e-4 rad in float32),
+                so that a rotation compares equal to itself and to its round trips.
+            degrees: ``atol`` is in degrees.
+        """
         if atol is None:
+            dt = jnp.result_type(self._stored.dtype, other._stored.dtype)
+            atol = 1e-8 * float(np.sqrt(jnp.finfo(dt).eps / np.finfo(np.float64).eps))
             if degrees:
                 warnings.warn(
-                    "atol must be set to use the degrees flag, defaulting to 1e-8 radians.",
+                    f"atol must be set to use the degrees flag, defaulting to {atol:.3g} radians.",
                     stacklevel=2,
                 )
-            atol = 1e-8
         elif degrees:
             atol = np.deg2rad(atol)
         p, q = _broadcast(
@@ -889,19 +932,15 @@ class Slerp:
         if t.ndim > 1:
             raise ValueError("`times` must be at most 1-dimensional.")
         host = _concrete(times)
-        if (
-            host is not None
-            and host.size
-            and not isinstance(self.times, jax.core.Tracer)  # keyframes traced: not checked
-            and (
-                np.any(host < np.asarray(self.times[0]))
-                or np.any(host > np.asarray(self.times[-1]))
-            )
-        ):
-            raise ValueError(
-                f"Interpolation times must be within the range [{float(self.times[0])}, "
-                f"{float(self.times[-1])}], both inclusive."
-            )
+        # The range is checked on the host only where both the times and the keyframe times
+        # are concrete (under jit, or with traced keyframes, out-of-range times give NaN).
+        if host is not None and host.size and not isinstance(self.times, jax.core.Tracer):
+            lo, hi = np.asarray(self.times)[[0, -1]]  # (indexing first would be traced)
+            if np.any(host < lo) or np.any(host > hi):
+                raise ValueError(
+                    f"Interpolation times must be within the range [{float(lo)}, "
+                    f"{float(hi)}], both inclusive."
+                )
         return Rotation._raw(
             _slerp_eval(self.times, self.timedelta, self.rotations._quat, self.rotvecs, t)
         )
@@ -954,6 +993,10 @@ _SPLINE_ITERATIONS = 10
 def _spline_coefficients(times, quat):
     h = jnp.diff(times)
     r = quaternion_to_rotvec(quaternion_multiply(quaternion_conjugate(quat[:-1]), quat[1:]))
+    # Equal keyframes: exactly 0 (a fused multiply-add leaves an ulp in conj(q) * q), so that a
+    # constant attitude has exactly zero rates; the derivative is that of r.
+    same = jnp.all(quat[:-1] == quat[1:], axis=-1, keepdims=True)
+    r = jnp.where(same, r - jax.lax.stop_gradient(r), r)
     n = r.shape[0]  # segments
     w_first, w_last = r[0] / h[0], r[-1] / h[-1]
     B = jax.vmap(_rate_jacobian)(r)
