@@ -5,6 +5,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._eigen import nearest_quaternion
 from ._numerics import (
@@ -22,17 +24,17 @@ METHODS = ("shepperd", "markley", "optimal")
 
 
 def _k4_columns(R, one=1.0):
-    """The four columns of ``K = 4 q q^T + (trace-free noise terms)`` as polynomials in ``R``.
+    """The four columns of `K = 4 q q^T + (trace-free noise terms)` as polynomials in `R`.
 
-    For a rotation matrix ``R = R(q)`` (active, scalar-last ``q``) column ``i`` equals
-    ``4 q_i q``; Baruh/Kamman Eqs. (2)-(8) transposed to the active convention. Each candidate is
-    exact arithmetic on the entries of ``R`` (no division, no root), so the selection below is
+    For a rotation matrix `R = R(q)` (active, scalar-last `q`) column `i` equals
+    `4 q_i q`; Baruh/Kamman Eqs. (2)-(8) transposed to the active convention. Each candidate is
+    exact arithmetic on the entries of `R` (no division, no root), so the selection below is
     branch-free and every candidate stays finite.
 
-    ``one`` is the ``1 = |q|^2`` on the diagonal. For a scaled rotation ``t R(q)`` the columns
-    are ``4 t q_i q`` with ``one = t``: passing an estimate of ``t`` (homogeneous of degree 1
-    in ``R``) makes ``K`` homogeneous, so that every quaternion read from it is scale
-    invariant. Replacing 1 by ``t`` adds ``(t - 1) I``, which changes no eigenvector.
+    `one` is the `1 = |q|^2` on the diagonal. For a scaled rotation `t R(q)` the columns
+    are `4 t q_i q` with `one = t`: passing an estimate of `t` (homogeneous of degree 1
+    in `R`) makes `K` homogeneous, so that every quaternion read from it is scale
+    invariant. Replacing 1 by `t` adds `(t - 1) I`, which changes no eigenvector.
     """
     r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
     r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
@@ -54,10 +56,10 @@ def _k4_columns(R, one=1.0):
 
 
 def _select(masks, vals):
-    """``vals[i]`` for the first true mask ``(use_x, use_y, use_z)``, else ``vals[3]``.
+    """`vals[i]` for the first true mask `(use_x, use_y, use_z)`, else `vals[3]`.
 
-    Nested ``jnp.where`` fuses into the surrounding XLA loop (an argmax + gather does not), and
-    unlike a one-hot product it cannot turn ``0 * inf`` into NaN.
+    Nested `jnp.where` fuses into the surrounding XLA loop (an argmax + gather does not), and
+    unlike a one-hot product it cannot turn `0 * inf` into NaN.
     """
     use_x, use_y, use_z = masks
     v = jnp.where(use_z, vals[2], vals[3])
@@ -66,9 +68,9 @@ def _select(masks, vals):
 
 
 def _prescaled(R):
-    """``R`` times a power of two that brings its largest entry into ``[0.5, 2)`` (exact; 1 for
+    """`R` times a power of two that brings its largest entry into `[0.5, 2)` (exact; 1 for
     a rotation matrix), so that no product below overflows or underflows, and its squared
-    Frobenius norm; both NaN where ``R`` is zero or has a non-finite entry (not a rotation)."""
+    Frobenius norm; both NaN where `R` is zero or has a non-finite entry (not a rotation)."""
     r = [R[..., k, j] for k in range(3) for j in range(3)]
     s = unit_scale(max_abs(*r))
     f2 = sum((x * s) * (x * s) for x in r)  # a scalar sum, not jnp.sum: one fused loop
@@ -78,47 +80,47 @@ def _prescaled(R):
 
 
 def _scaled_k(R):
-    """The columns of the homogeneous ``K`` (see :func:`_k4_columns`) of the prescaled ``R``,
-    with ``t = |R|_F / sqrt(3)`` (1 for a rotation matrix, ``s`` for ``s`` times one), and the
-    ``d`` terms. NaN throughout for a zero or non-finite ``R``."""
+    """The columns of the homogeneous `K` (see `_k4_columns`) of the prescaled `R`,
+    with `t = |R|_F / sqrt(3)` (1 for a rotation matrix, `s` for `s` times one), and the
+    `d` terms. NaN throughout for a zero or non-finite `R`."""
     R, f2, _ = _prescaled(R)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
     return _k4_columns(R, jnp.sqrt(h))  # correctly rounded: the same bits in every program
 
 
 def _masks(diag):
-    """``(use_x, use_y, use_z)`` for :func:`_select`: the largest diagonal entry of ``K``."""
+    """`(use_x, use_y, use_z)` for `_select`: the largest diagonal entry of `K`."""
     dx, dy, dz, dw = diag
     return (dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw
 
 
 def _select_column(cols, diag):
-    """The column of ``K`` with the largest diagonal entry, as four per-rotation arrays, and its
-    squared norm, at least ``t^2 >= 1/12`` (the four diagonal entries of ``K`` sum to ``4 t``,
-    so the largest is at least ``t``): no small divisor, and :func:`rsqrt`'s domain."""
+    """The column of `K` with the largest diagonal entry, as four per-rotation arrays, and its
+    squared norm, at least `t^2 >= 1/12` (the four diagonal entries of `K` sum to `4 t`,
+    so the largest is at least `t`): no small divisor, and `rsqrt`'s domain."""
     masks = _masks(diag)
     c = [_select(masks, [col[i] for col in cols]) for i in range(4)]
     return c, sum(x * x for x in c)
 
 
 def _selected_column(R):
-    """:func:`_select_column` of the prescaled, homogeneous ``K`` of ``R``."""
+    """`_select_column` of the prescaled, homogeneous `K` of `R`."""
     return _select_column(*_scaled_k(R))
 
 
 def _hemisphere_scale(v, sq, root=rsqrt):
-    """``1 / |v|`` (``sq = |v|^2``, away from 0: see :func:`_select_column`), negated where
-    ``w < 0``: ``v * scale`` is the unit quaternion with ``w >= 0``.
+    """`1 / |v|` (`sq = |v|^2`, away from 0: see `_select_column`), negated where
+    `w < 0`: `v * scale` is the unit quaternion with `w >= 0`.
 
-    ``root``: :func:`rsqrt` (default), which XLA fuses into the loop that writes the four
-    components. With ``jnp.sqrt`` it gives the signed norm instead (:func:`_signed_norm`).
+    `root`: `rsqrt` (default), which XLA fuses into the loop that writes the four
+    components. With `jnp.sqrt` it gives the signed norm instead (`_signed_norm`).
     """
     s = root(sq)
     return jnp.where(v[3] < 0, -s, s)
 
 
 def _stack_last(v, scale):
-    """``(..., 4)`` from four per-rotation components times a per-rotation scale.
+    """`(..., 4)` from four per-rotation components times a per-rotation scale.
 
     Stacked on a leading axis and moved last: XLA:CPU emits one transposing loop.
     """
@@ -127,14 +129,14 @@ def _stack_last(v, scale):
 
 @jax.custom_jvp
 def _shepperd(R):
-    """Shepperd extraction, scalar last, ``w >= 0``: the selected column of ``K`` over its norm.
+    """Shepperd extraction, scalar last, `w >= 0`: the selected column of `K` over its norm.
 
     Written for XLA:CPU: every step is a per-rotation scalar expression (no reduction over a
-    stacked axis); the four components are selected first and the scale ``rsqrt(|c|^2)`` is
-    computed from them; with :func:`rsqrt` (multiplications and additions only) XLA emits a
+    stacked axis); the four components are selected first and the scale `rsqrt(|c|^2)` is
+    computed from them; with `rsqrt` (multiplications and additions only) XLA emits a
     single transposing loop that reads the matrix once. JAX differentiates this code itself:
     every operation has a finite derivative wherever it is reached (the divisor is at least
-    ``t^2``), and at a switch of the selected column it is the derivative of the branch taken.
+    `t^2`), and at a switch of the selected column it is the derivative of the branch taken.
     The rule below is that derivative, written for reverse mode (tested equal to JAX's).
     """
     c, sq = _selected_column(R)
@@ -144,8 +146,8 @@ def _shepperd(R):
 
 
 def _dk_pattern():
-    """``P[a, b, k, j]``: the derivative of ``K[a, b]`` with respect to ``R[k, j]`` (``K`` is
-    affine in ``R``; read off :func:`_k4_columns` on unit matrices, in NumPy)."""
+    """`P[a, b, k, j]`: the derivative of `K[a, b]` with respect to `R[k, j]` (`K` is
+    affine in `R`; read off `_k4_columns` on unit matrices, in NumPy)."""
     out = np.zeros((4, 4, 3, 3))
     for k in range(3):
         for j in range(3):
@@ -193,25 +195,25 @@ def _shepperd_jvp(primals, tangents):
 
 
 def _signed_norm(c, sq):
-    """``sqrt(sq)`` (``sq = |c|^2``) with the sign of ``c[3]``: ``c / n`` is the unit quaternion
-    with ``w >= 0`` (for the selected column, the Shepperd quaternion; up to rounding, ``c``
-    times :func:`_hemisphere_scale`, the same sign rule with the reciprocal root)."""
+    """`sqrt(sq)` (`sq = |c|^2`) with the sign of `c[3]`: `c / n` is the unit quaternion
+    with `w >= 0` (for the selected column, the Shepperd quaternion; up to rounding, `c`
+    times `_hemisphere_scale`, the same sign rule with the reciprocal root)."""
     return _hemisphere_scale(c, sq, jnp.sqrt)
 
 
 def _divide_stacked(parts, n):
-    """``(..., k)``: the parts (per-rotation arrays) stacked last and divided by ``n`` stacked
-    alike. XLA:CPU keeps the division (a divisor broadcast from ``(..., 1)`` was turned into a
-    multiplication by its reciprocal), so the quotients are the same bits as ``p / n``."""
+    """`(..., k)`: the parts (per-rotation arrays) stacked last and divided by `n` stacked
+    alike. XLA:CPU keeps the division (a divisor broadcast from `(..., 1)` was turned into a
+    multiplication by its reciprocal), so the quotients are the same bits as `p / n`."""
     return jnp.stack(parts, axis=-1) / jnp.stack([n] * len(parts), axis=-1)
 
 
 @jax.custom_jvp
 def _shepperd_divided(R):
     """The Shepperd quaternion as the selected column divided by its signed norm (stacked, see
-    :func:`_divide_stacked`), for ``matrix_to_euler``: XLA:CPU writes it out once, where with
+    `_divide_stacked`), for `matrix_to_euler`: XLA:CPU writes it out once, where with
     a reciprocal square root it recomputed parts of it inside the Euler extraction. The same
-    function as :func:`_shepperd` up to rounding, with the same derivative rule (tested equal
+    function as `_shepperd` up to rounding, with the same derivative rule (tested equal
     to JAX's derivative of this code)."""
     c, sq = _selected_column(R)
     return _divide_stacked(c, _signed_norm(c, sq))
@@ -224,16 +226,16 @@ def _shepperd_divided_jvp(primals, tangents):
 
 
 def _k_times(cols, p):
-    """``K p`` for the symmetric ``K`` given by its columns, on per-rotation components."""
+    """`K p` for the symmetric `K` given by its columns, on per-rotation components."""
     return [sum(cols[i][c] * p[i] for i in range(4)) for c in range(4)]
 
 
 def _markley(R):
-    """Shepperd's quaternion refined by one power-iteration step with ``K``, ``w >= 0``.
+    """Shepperd's quaternion refined by one power-iteration step with `K`, `w >= 0`.
 
-    ``K = 4 q q^T`` (+ noise) has eigenvalues 4, 0, 0, 0 for a rotation, so one product removes
+    `K = 4 q q^T` (+ noise) has eigenvalues 4, 0, 0, 0 for a rotation, so one product removes
     the O(sigma) error of the selected column and leaves O(sigma^2). Per-rotation scalar
-    expressions throughout, as in :func:`_shepperd` (the Shepperd quaternion is not stacked
+    expressions throughout, as in `_shepperd` (the Shepperd quaternion is not stacked
     and unstacked in between: that cost a transposing loop).
     """
     cols, diag = _scaled_k(R)
@@ -254,53 +256,66 @@ def _from_matrix(R, method: str):
 
 
 @public
-def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False):
-    """Quaternion of a rotation matrix, with ``w >= 0``.
+def matrix_to_quaternion(
+    R: ArrayLike, method: str = "shepperd", scalar_first: bool = False
+) -> Array:
+    """Quaternion of a rotation matrix, with `w >= 0`.
 
     Args:
-        R: ``(..., 3, 3)`` active rotation matrix (``v_world = R @ v_body``). A passive
+        R: `(..., 3, 3)` active rotation matrix (`v_world = R @ v_body`). A passive
             direction-cosine matrix, as in Kamman's notes, must be transposed first.
         method: how to treat matrices that are not exactly orthogonal:
 
-            * ``"shepperd"`` (default): branch-free largest-component extraction (Shepperd 1978;
-              Baruh/Kamman Eqs. 5-8; Markley 2008). The column of ``K = 4 q q^T`` with the
-              largest diagonal is selected with nested ``jnp.where`` and normalised once. Exact
+            * `"shepperd"` (default): branch-free largest-component extraction (Shepperd 1978;
+              Baruh/Kamman Eqs. 5-8; Markley 2008). The column of `K = 4 q q^T` with the
+              largest diagonal is selected with nested `jnp.where` and normalised once. Exact
               to about 1 eps for rotation matrices; error O(sigma) for noise sigma.
-            * ``"markley"``: the Shepperd column followed by one power-iteration step with ``K``.
+            * `"markley"`: the Shepperd column followed by one power-iteration step with `K`.
               About 35 more flops; brings noisy matrices to within O(sigma^2) of optimal.
-            * ``"optimal"``: the quaternion of the nearest rotation (Bar-Itzhack 2000): the top
-              eigenvector of the symmetric 4x4 ``K`` by rotjax's elementwise eigen kernel
-              (a one-sided Jacobi SVD of ``R``, fixed sweeps; no LAPACK). Any input, ``det < 0``
+            * `"optimal"`: the quaternion of the nearest rotation (Bar-Itzhack 2000): the top
+              eigenvector of the symmetric 4x4 `K` by rotjax's elementwise eigen kernel
+              (a one-sided Jacobi SVD of `R`, fixed sweeps; no LAPACK). Any input, `det < 0`
               included. Slowest: see the performance page.
-        scalar_first: return ``(w, x, y, z)``.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion with ``w >= 0`` (at exactly 180 degrees, ``w = 0`` and the
-        sign is that of the selected component; with ``"optimal"``, wherever ``|w| <= 4 eps``,
-        so that the rounding of the input does not flip the sign).
+        `(..., 4)` unit quaternion with `w >= 0` (at exactly 180 degrees, `w = 0` and the
+            sign is that of the selected component; with `"optimal"`, wherever `|w| <= 4 eps`,
+            so that the rounding of the input does not flip the sign).
 
     Note:
-        *Scale.* ``K`` is built homogeneous (its diagonal ``1 = |q|^2`` replaced by
-        ``t = |R|_F / sqrt(3)``, which adds ``(t - 1) I`` and changes no eigenvector), and
-        ``R`` is scaled by an exact power of two when its largest entry is outside
-        ``[0.5, 2)``: every method gives the same unit quaternion, to a few eps, for ``s R``
-        as for ``R``, for any ``s > 0`` from 1e-30 to 1e30 (float32) or 1e-300 to 1e300
+        *Scale.* `K` is built homogeneous (its diagonal `1 = |q|^2` replaced by
+        `t = |R|_F / sqrt(3)`, which adds `(t - 1) I` and changes no eigenvector), and
+        `R` is scaled by an exact power of two when its largest entry is outside
+        `[0.5, 2)`: every method gives the same unit quaternion, to a few eps, for `s R`
+        as for `R`, for any `s > 0` from 1e-30 to 1e30 (float32) or 1e-300 to 1e300
         (float64). A rotation matrix is not rescaled. The zero matrix, or any infinite or NaN
         entry, gives NaN (in that batch element only).
 
         *Singular points.* No sqrt or division is applied to a small number: the selected
-        column has squared norm at least ``t^2``, so every method is finite and differentiable
+        column has squared norm at least `t^2`, so every method is finite and differentiable
         at the identity and at every 180-degree rotation.
 
-        *Gradients.* ``jax.grad`` and ``jax.jvp`` give the derivative of the function computed,
-        in every 3x3 direction, on and off SO(3): a perturbation ``R @ S`` with ``S``
-        symmetric (scaling, shear) moves ``"shepperd"`` and ``"markley"`` as it moves their
+        *Gradients.* `jax.grad` and `jax.jvp` give the derivative of the function computed,
+        in every 3x3 direction, on and off SO(3): a perturbation `R @ S` with `S`
+        symmetric (scaling, shear) moves `"shepperd"` and `"markley"` as it moves their
         formulas. Where the selected column switches (off SO(3) the result jumps there), it
-        is the derivative of the branch taken. ``"shepperd"`` has a hand-written rule for
+        is the derivative of the branch taken. `"shepperd"` has a hand-written rule for
         reverse-mode speed, equal to JAX's derivative of its code (tested). For the derivative
         of "the rotation nearest to this matrix", which ignores such perturbations to first
-        order, use ``"optimal"``: its gradient is that of the top eigenvector, finite while
+        order, use `"optimal"`: its gradient is that of the top eigenvector, finite while
         the top eigenvalue is simple (always, for matrices near a rotation).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        R = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # 90 deg about z
+        print(rj.matrix_to_quaternion(R).round(6))
+        # [0.       0.       0.707107 0.707107]
+        print(rj.matrix_to_quaternion(R, scalar_first=True).round(6))
+        # [0.707107 0.       0.       0.707107]
+        ```
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
