@@ -777,9 +777,10 @@ def angular_acceleration_to_euler_accelerations(
         import rotjax as rj
 
         angles, rates = [0.3, 0.2, 0.1], [0.5, -0.2, 1.0]
-        alpha = rj.euler_accelerations_to_angular_acceleration(angles, rates, [0.1, 0.2, 0.3],
-        "ZYX") print(rj.angular_acceleration_to_euler_accelerations(angles, rates, alpha,
-        "ZYX").round(6)) # [0.1 0.2 0.3]
+        acc = [0.1, 0.2, 0.3]
+        alpha = rj.euler_accelerations_to_angular_acceleration(angles, rates, acc, "ZYX")
+        print(rj.angular_acceleration_to_euler_accelerations(angles, rates, alpha, "ZYX").round(6))
+        # [0.1 0.2 0.3]
         ```
     """
     (a, r, al), dt = as_float(angles, rates, alpha)
