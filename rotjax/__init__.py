@@ -1,12 +1,12 @@
 """rotjax: 3-D rotation maths in JAX, branch-free and differentiable everywhere it can be.
 
-Pure functions on arrays, named ``<source>_to_<target>`` over quaternions (scalar last
-``(x, y, z, w)``, Hamilton product), active rotation matrices (``v_world = R @ v_body``),
-rotation vectors, axis-angle pairs and Euler angles (scipy's sequences: ``"ZXZ"`` intrinsic,
-``"zxz"`` extrinsic); kinematics (``frame="body"`` or ``"world"``) and fitting. Leading batch
-dimensions broadcast; float32 and float64 are kept; every function works under ``jax.jit``,
-``jax.vmap`` and ``jax.grad``. The public functions are listed in ``__all__``; the conventions,
-gradient policy and guides are in the documentation (``docs/``).
+Pure functions on arrays, named `<source>_to_<target>` over quaternions (scalar last
+`(x, y, z, w)`, Hamilton product), active rotation matrices (`v_world = R @ v_body`),
+rotation vectors, axis-angle pairs and Euler angles (scipy's sequences: `"ZXZ"` intrinsic,
+`"zxz"` extrinsic); kinematics (`frame="body"` or `"world"`) and fitting. Leading batch
+dimensions broadcast; float32 and float64 are kept; every function works under `jax.jit`,
+`jax.vmap` and `jax.grad`. The public functions are listed in `__all__`; the conventions,
+gradient policy and guides are in the documentation (`docs/`).
 """
 
 from . import manifold as manifold

@@ -8,6 +8,8 @@ import itertools
 
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike, DTypeLike
 
 from ._fitting import _svd_signed
 from ._numerics import (
@@ -25,26 +27,34 @@ from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
 
 
 def _canonical(q):
-    """Sign flip making the first non-zero of ``(w, x, y, z)`` positive (scalar-last ``q``)."""
+    """Sign flip making the first non-zero of `(w, x, y, z)` positive (scalar-last `q`)."""
     x, y, z, w = jnp.moveaxis(q, -1, 0)
     lead = jnp.where(w != 0, w, jnp.where(x != 0, x, jnp.where(y != 0, y, z)))
     return jnp.where((lead < 0)[..., None], -q, q)
 
 
 @public
-def quaternion_canonical(q, scalar_first: bool = False):
-    """The one of ``q`` and ``-q`` whose first non-zero component of ``(w, x, y, z)`` is positive.
+def quaternion_canonical(q: ArrayLike, scalar_first: bool = False) -> Array:
+    """The one of `q` and `-q` whose first non-zero component of `(w, x, y, z)` is positive.
 
     Args:
-        q: ``(..., 4)`` quaternion (not normalised).
-        scalar_first: ``q`` (input and output) is ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion (not normalised).
+        scalar_first: `q` (input and output) is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` ``q`` or ``-q``: ``w > 0``, or ``w = 0`` and ``x > 0``, and so on; as
-        scipy's ``as_quat(canonical=True)``.
+        `(..., 4)` `q` or `-q`: `w > 0`, or `w = 0` and `x > 0`, and so on; as
+            scipy's `as_quat(canonical=True)`.
 
     Note:
-        The sign is piecewise constant, so the gradient is that of ``+-q``: finite everywhere.
+        The sign is piecewise constant, so the gradient is that of `+-q`: finite everywhere.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.quaternion_canonical([0.0, 0.0, 0.6, -0.8]))  # w < 0: the sign flips
+        # [-0.  -0.  -0.6  0.8]
+        ```
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
@@ -53,23 +63,33 @@ def quaternion_canonical(q, scalar_first: bool = False):
 
 
 @public
-def quaternion_power(q, n, scalar_first: bool = False):
-    """Fractional power ``q^n = exp(n log q)`` of a rotation: the angle times ``n``, same axis.
+def quaternion_power(q: ArrayLike, n: ArrayLike, scalar_first: bool = False) -> Array:
+    """Fractional power `q^n = exp(n log q)` of a rotation: the angle times `n`, same axis.
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit (zero gives NaN).
-        n: ``(...)`` exponent; broadcasts against ``q[..., 0]``. ``n = -1`` is the inverse,
-            ``n = 0`` the identity, ``n = 2`` the rotation applied twice.
-        scalar_first: ``q`` (input and output) is ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion; need not be unit (zero gives NaN).
+        n: `(...)` exponent; broadcasts against `q[..., 0]`. `n = -1` is the inverse,
+            `n = 0` the identity, `n = 2` the rotation applied twice.
+        scalar_first: `q` (input and output) is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion, the rotation by ``n`` times the angle of ``q`` in
-        ``[0, pi]`` about its axis (scipy's ``Rotation.__pow__``).
+        `(..., 4)` unit quaternion, the rotation by `n` times the angle of `q` in
+            `[0, pi]` about its axis (scipy's `Rotation.__pow__`).
 
     Note:
         The logarithm and exponential have Taylor branches at the identity: values and
         gradients are exact there. At exactly 180 degrees the logarithm has a cut (the axis
         sign follows the vector part), so non-integer powers of a half turn pick one side.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = rj.axis_angle_to_quaternion([0.0, 0.0, 1.0], 90.0, degrees=True)
+        _, angle = rj.quaternion_to_axis_angle(rj.quaternion_power(q, 0.5), degrees=True)
+        print(angle.round(4))
+        # 45.0
+        ```
     """
     (q, n), dt = as_float(q, n)
     check_shape(q, (4,), "q")
@@ -94,8 +114,8 @@ def _cyclic(n: int, axis: int) -> np.ndarray:
 
 
 def _dihedral(n: int, axis: int) -> np.ndarray:
-    # C_n plus the n half turns about axes perpendicular to ``axis``, spaced pi / n apart,
-    # starting at the next coordinate axis after ``axis``.
+    # C_n plus the n half turns about axes perpendicular to `axis`, spaced pi / n apart,
+    # starting at the next coordinate axis after `axis`.
     t = np.pi * np.arange(n) / n
     u, v = (axis + 1) % 3, (axis + 2) % 3
     flips = np.zeros((n, 4))
@@ -105,7 +125,7 @@ def _dihedral(n: int, axis: int) -> np.ndarray:
 
 
 def _signed_permutations(base, even_only: bool) -> np.ndarray:
-    """Distinct quaternions from permutations of ``base`` with all sign choices, one of each
+    """Distinct quaternions from permutations of `base` with all sign choices, one of each
     +-q pair."""
     out = set()
     for perm in itertools.permutations(range(4)):
@@ -160,24 +180,39 @@ def _group_cached(group: str, axis: str) -> np.ndarray:
     return q
 
 
-def rotation_group(group: str, axis: str = "Z", dtype=None, scalar_first: bool = False):
+def rotation_group(
+    group: str, axis: str = "Z", dtype: DTypeLike | None = None, scalar_first: bool = False
+) -> Array:
     """Quaternions of a finite subgroup of SO(3).
 
     Args:
-        group: ``"Cn"`` (cyclic: ``n`` rotations about ``axis``), ``"Dn"`` (dihedral: ``C_n``
-            and ``n`` half turns about axes perpendicular to ``axis``), ``"T"`` (tetrahedral,
-            12), ``"O"`` (octahedral, 24) or ``"I"`` (icosahedral, 60). ``n`` is a positive
+        group: `"Cn"` (cyclic: `n` rotations about `axis`), `"Dn"` (dihedral: `C_n`
+            and `n` half turns about axes perpendicular to `axis`), `"T"` (tetrahedral,
+            12), `"O"` (octahedral, 24) or `"I"` (icosahedral, 60). `n` is a positive
             integer.
-        axis: ``"X"``, ``"Y"`` or ``"Z"``: the principal axis of ``Cn`` and ``Dn``.
-        dtype: float dtype of the result; JAX's default float if ``None``.
-        scalar_first: return ``(w, x, y, z)``.
+        axis: `"X"`, `"Y"` or `"Z"`: the principal axis of `Cn` and `Dn`.
+        dtype: float dtype of the result; JAX's default float if `None`.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(N, 4)`` unit quaternions, one per group element, the identity first for ``Cn`` and
-        ``Dn``. Computed in float64 with NumPy, then cast.
+        `(N, 4)` unit quaternions, one per group element, the identity first for `Cn` and
+            `Dn`. Computed in float64 with NumPy, then cast.
 
     Raises:
         ValueError: for an unknown group or axis.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.rotation_group("O").shape, rj.rotation_group("D3").shape)
+        # (24, 4) (6, 4)
+        print(rj.rotation_group("C4").round(6))
+        # [[ 0.        0.        0.        1.      ]
+        #  [ 0.        0.        0.707107  0.707107]
+        #  [ 0.        0.        1.        0.      ]
+        #  [ 0.        0.        0.707107 -0.707107]]
+        ```
     """
     if dtype is not None and not jnp.issubdtype(dtype, jnp.floating):
         raise TypeError(f"dtype must be real (a floating dtype), got {jnp.dtype(dtype)}")
@@ -187,24 +222,44 @@ def rotation_group(group: str, axis: str = "Z", dtype=None, scalar_first: bool =
 
 
 @public
-def quaternion_reduce(q, left=None, right=None, scalar_first: bool = False):
-    """Reduce rotations by groups: ``l * q * r`` with ``l``, ``r`` from the groups chosen to
-    make the rotation angle smallest (scipy's ``Rotation.reduce``).
+def quaternion_reduce(
+    q: ArrayLike,
+    left: ArrayLike | None = None,
+    right: ArrayLike | None = None,
+    scalar_first: bool = False,
+) -> tuple[Array, Array, Array]:
+    """Reduce rotations by groups: `l * q * r` with `l`, `r` from the groups chosen to
+    make the rotation angle smallest (scipy's `Rotation.reduce`).
 
     Args:
-        q: ``(..., 4)`` quaternions; need not be unit.
-        left: ``(L, 4)`` quaternions of the left group, or ``None`` (identity only).
-        right: ``(M, 4)`` quaternions of the right group, or ``None``.
-        scalar_first: quaternions (input and output) are ``(w, x, y, z)``.
+        q: `(..., 4)` quaternions; need not be unit.
+        left: `(L, 4)` quaternions of the left group, or `None` (identity only).
+        right: `(M, 4)` quaternions of the right group, or `None`.
+        scalar_first: quaternions (input and output) are `(w, x, y, z)`.
 
     Returns:
-        ``(reduced, left_index, right_index)``: ``(..., 4)`` unit quaternions and the
-        ``(...)`` integer indices of the chosen elements (0 where the group is ``None``).
+        reduced: `(..., 4)` unit quaternions `l * q * r`.
+        left_index: `(...)` integer index of the chosen `l` in `left` (0 if `left` is
+            `None`).
+        right_index: `(...)` integer index of the chosen `r` in `right` (0 if `right` is
+            `None`).
 
     Note:
-        The smallest angle is the largest ``|w|``; ties go to the lowest flat index
-        ``left_index * M + right_index``. The choice is piecewise constant, so the gradient is
+        The smallest angle is the largest `|w|`; ties go to the lowest flat index
+        `left_index * M + right_index`. The choice is piecewise constant, so the gradient is
         that of the chosen product (finite).
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        group = rj.rotation_group("C4")  # quarter turns about z
+        q = rj.axis_angle_to_quaternion([0.0, 0.0, 1.0], 100.0, degrees=True)
+        reduced, left_index, right_index = rj.quaternion_reduce(q, left=group)
+        print(jnp.rad2deg(rj.rotation_angle(reduced)).round(4), left_index)
+        # 10.0 3
+        ```
     """
     arrays = [x for x in (q, left, right) if x is not None]
     conv, dt = as_float(*arrays)
@@ -240,27 +295,39 @@ def quaternion_reduce(q, left=None, right=None, scalar_first: bool = False):
 
 
 @public
-def wahba_sensitivity(a, b, weights=None):
+def wahba_sensitivity(a: ArrayLike, b: ArrayLike, weights: ArrayLike | None = None) -> Array:
     """Sensitivity matrix of Wahba's problem (Markley & Crassidis 2014, Sec. 5.5.4).
 
     The covariance of the attitude error (rotation vector, reference frame) of
-    :func:`align_vectors`' solution for measurement noise of unit variance per weight, up to
-    the factor the noise variance. This is scipy's ``align_vectors(...,
-    return_sensitivity=True)`` matrix: ``mean(w) / zeta * (kappa I + B B^T)`` with
-    ``B = sum w_i a_i b_i^T`` and the signed singular values ``s`` of ``B``,
-    ``zeta = (s1 + s2)(s2 + s3)(s3 + s1)``, ``kappa = s1 s2 + s2 s3 + s3 s1``.
+    [`align_vectors`][rotjax.align_vectors]' solution for measurement noise of unit variance per
+    weight, up to the factor the noise variance. This is scipy's `align_vectors(...,
+    return_sensitivity=True)` matrix: `mean(w) / zeta * (kappa I + B B^T)` with `B = sum w_i a_i
+    b_i^T` and the signed singular values `s` of `B`, `zeta = (s1 + s2)(s2 + s3)(s3 + s1)`, `kappa =
+    s1 s2 + s2 s3 + s3 s1`.
 
     Args:
-        a: ``(..., N, 3)`` reference-frame vectors.
-        b: ``(..., N, 3)`` body-frame vectors.
-        weights: ``(..., N)`` non-negative weights; ``None`` for all ones.
+        a: `(..., N, 3)` reference-frame vectors.
+        b: `(..., N, 3)` body-frame vectors.
+        weights: `(..., N)` non-negative weights; `None` for all ones.
 
     Returns:
-        ``(..., 3, 3)`` symmetric matrix.
+        `(..., 3, 3)` symmetric matrix.
 
     Note:
-        ``zeta = 0`` (all vectors parallel: the rotation about them is unobservable) gives
+        `zeta = 0` (all vectors parallel: the rotation about them is unobservable) gives
         inf/NaN, as the covariance is unbounded.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        a = jnp.eye(3)  # three orthogonal directions, observed without rotation
+        print(rj.wahba_sensitivity(a, a).round(6))
+        # [[0.5 0.  0. ]
+        #  [0.  0.5 0. ]
+        #  [0.  0.  0.5]]
+        ```
     """
     if weights is None:
         (a, b), dt = as_float(a, b)

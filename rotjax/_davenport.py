@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._euler import _quat_to_euler
 from ._matrix import _from_matrix
@@ -14,7 +16,7 @@ ORDERS = {"e": True, "extrinsic": True, "i": False, "intrinsic": False}
 
 
 def parse_order(order) -> bool:
-    """``True`` for extrinsic, ``False`` for intrinsic; ValueError otherwise."""
+    """`True` for extrinsic, `False` for intrinsic; ValueError otherwise."""
     if order not in ORDERS:
         raise ValueError(
             "order should be 'e'/'extrinsic' for extrinsic sequences or 'i'/'intrinsic' for "
@@ -25,27 +27,44 @@ def parse_order(order) -> bool:
 
 @public(static=("extrinsic",))
 def davenport_to_quaternion(
-    axes, angles, extrinsic: bool = False, degrees: bool = False, scalar_first: bool = False
-):
-    """Quaternion of Davenport angles: rotations by ``angles[k]`` about ``axes[k]``.
+    axes: ArrayLike,
+    angles: ArrayLike,
+    extrinsic: bool = False,
+    degrees: bool = False,
+    scalar_first: bool = False,
+) -> Array:
+    """Quaternion of Davenport angles: rotations by `angles[k]` about `axes[k]`.
 
     Args:
-        axes: ``(..., K, 3)`` rotation axes, ``K`` in 1..3; need not be unit (each is
-            normalised). Consecutive axes must be orthogonal (``|dot| <= 1e-7`` after
+        axes: `(..., K, 3)` rotation axes, `K` in 1..3; need not be unit (each is
+            normalised). Consecutive axes must be orthogonal (`|dot| <= 1e-7` after
             normalisation, scipy's tolerance); otherwise the result is NaN.
-        angles: ``(..., K)`` angles; broadcasts against ``axes[..., 0]``.
-        extrinsic: the axes are fixed (world) axes, ``R = R_K ... R_1``; otherwise they rotate
-            with the body (intrinsic), ``R = R_1 ... R_K``.
+        angles: `(..., K)` angles; broadcasts against `axes[..., 0]`.
+        extrinsic: the axes are fixed (world) axes, `R = R_K ... R_1`; otherwise they rotate
+            with the body (intrinsic), `R = R_1 ... R_K`.
         degrees: angles are in degrees.
-        scalar_first: return ``(w, x, y, z)``.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion (the product of the elementary quaternions, no hemisphere
-        imposed, so the map is smooth in the angles and axes).
+        `(..., 4)` unit quaternion (the product of the elementary quaternions, no hemisphere
+            imposed, so the map is smooth in the angles and axes).
 
     Note:
-        With the coordinate axes this is :func:`euler_to_quaternion` (intrinsic ``"XYZ"`` is
-        ``axes = eye(3)``). A zero axis gives NaN.
+        With the coordinate axes this is [`euler_to_quaternion`][rotjax.euler_to_quaternion]
+        (intrinsic `"XYZ"` is `axes = eye(3)`). A zero axis gives NaN.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        axes = jnp.eye(3)  # the coordinate axes: intrinsic "XYZ" Euler angles
+        q = rj.davenport_to_quaternion(axes, [10.0, 20.0, 30.0], degrees=True)
+        print(q.round(6))
+        # [0.127679 0.144878 0.268536 0.943714]
+        print(rj.euler_to_quaternion([10.0, 20.0, 30.0], "XYZ", degrees=True).round(6))
+        # [0.127679 0.144878 0.268536 0.943714]
+        ```
     """
     (axes, angles), dt = as_float(axes, angles)
     check_shape(axes, (3,), "axes")
@@ -72,33 +91,48 @@ def davenport_to_quaternion(
 
 @public(static=("extrinsic",))
 def quaternion_to_davenport(
-    q, axes, extrinsic: bool = False, degrees: bool = False, scalar_first: bool = False
-):
+    q: ArrayLike,
+    axes: ArrayLike,
+    extrinsic: bool = False,
+    degrees: bool = False,
+    scalar_first: bool = False,
+) -> Array:
     """Davenport angles of a rotation about three axes (consecutive axes orthogonal).
 
-    Reduced to Euler angles by a change of basis: with ``B = [m1, m2, m1 x m2]`` and ``m3 =
-    cos(l) m1 + sin(l) (m1 x m2)``, the rotation ``R = R_m1(a) R_m2(b) R_m3(c)`` satisfies
-    ``B^T R B Ry(-l) = Rx(a) Ry(b - l) Rx(c)``: the proper Euler sequence ``"XYX"``.
+    Reduced to Euler angles by a change of basis: with `B = [m1, m2, m1 x m2]` and `m3 =
+    cos(l) m1 + sin(l) (m1 x m2)`, the rotation `R = R_m1(a) R_m2(b) R_m3(c)` satisfies
+    `B^T R B Ry(-l) = Rx(a) Ry(b - l) Rx(c)`: the proper Euler sequence `"XYX"`.
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit.
-        axes: ``(..., 3, 3)`` the three axes (rows; normalised here), ``axes[0] . axes[1] = 0``
-            and ``axes[1] . axes[2] = 0``; batch shape broadcasts against ``q``'s.
+        q: `(..., 4)` quaternion; need not be unit.
+        axes: `(..., 3, 3)` the three axes (rows; normalised here), `axes[0] . axes[1] = 0`
+            and `axes[1] . axes[2] = 0`; batch shape broadcasts against `q`'s.
         extrinsic: the axes are fixed (world) axes; otherwise they rotate with the body.
         degrees: return degrees.
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 3)`` angles as scipy's ``as_davenport``: first and third in ``[-pi, pi]``; the
-        middle one in ``[-l, pi - l]`` where ``l`` in ``[-pi, 0]`` is the signed angle from
-        the first to the last axis (of the intrinsic order) about the middle one, and in
-        ``[l - pi, l]`` for ``l`` in ``(0, pi]``. Coordinate axes give the Euler angles of
-        :func:`quaternion_to_euler`. Axes that are not orthogonal (``|dot| > 1e-7``, scipy's
-        tolerance) give NaN.
+        `(..., 3)` angles as scipy's `as_davenport`: first and third in `[-pi, pi]`; the
+            middle one in `[-l, pi - l]` where `l` in `[-pi, 0]` is the signed angle from
+            the first to the last axis (of the intrinsic order) about the middle one, and in
+            `[l - pi, l]` for `l` in `(0, pi]`. Coordinate axes give the Euler angles of
+            [`quaternion_to_euler`][rotjax.quaternion_to_euler]. Axes that are not orthogonal
+            (`|dot| > 1e-7`, scipy's tolerance) give NaN.
 
     Note:
-        Inherits :func:`quaternion_to_euler`'s behaviour: no gimbal-lock threshold, the last
-        angle (of the intrinsic order) 0 at exact lock, finite gradients there.
+        Inherits [`quaternion_to_euler`][rotjax.quaternion_to_euler]'s behaviour: no gimbal-lock
+        threshold, the last angle (of the intrinsic order) 0 at exact lock, finite gradients there.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        axes = jnp.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # z, x, z
+        q = rj.euler_to_quaternion([10.0, 20.0, 30.0], "ZXZ", degrees=True)
+        print(rj.quaternion_to_davenport(q, axes, degrees=True).round(4))
+        # [10. 20. 30.]
+        ```
     """
     (q, axes), dt = as_float(q, axes)
     check_shape(q, (4,), "q")

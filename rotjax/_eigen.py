@@ -5,19 +5,19 @@ matrix (Bar-Itzhack 2000), Wahba's problem (Davenport's q-method) and the quater
 (Markley et al. 2007) each reduce to the eigenvector of the largest eigenvalue of a symmetric
 4x4 matrix.
 
-* Every symmetric ``K`` is Davenport's ``K(B)`` of a 3x3 ``B`` (a linear bijection onto the
-  traceless part; see :func:`_k_to_b`) plus a multiple of ``I``, and the top eigenvector of
-  ``K(B)`` is the quaternion of ``Q = U diag(1, 1, det(U V^T)) V^T`` for the SVD
-  ``B = U S V^T``: the rotation that maximises ``tr(Q^T B)``. Its other eigenvectors are
-  ``q (x) (v_j, 0)`` (``Q`` composed with a half turn about a right singular vector).
-* Forward: one-sided (Hestenes) Jacobi on the 3x3 ``B``, a fixed number of rotations, then ``Q``
-  from the two largest columns of ``B V`` and their cross product (no division by the smallest
-  singular value; ``det B < 0`` and rank-deficient ``B`` included), and Shepperd's extraction.
-  ``B`` is first scaled by an exact power of two, so the result does not depend on its scale.
+* Every symmetric `K` is Davenport's `K(B)` of a 3x3 `B` (a linear bijection onto the
+  traceless part; see `_k_to_b`) plus a multiple of `I`, and the top eigenvector of
+  `K(B)` is the quaternion of `Q = U diag(1, 1, det(U V^T)) V^T` for the SVD
+  `B = U S V^T`: the rotation that maximises `tr(Q^T B)`. Its other eigenvectors are
+  `q (x) (v_j, 0)` (`Q` composed with a half turn about a right singular vector).
+* Forward: one-sided (Hestenes) Jacobi on the 3x3 `B`, a fixed number of rotations, then `Q`
+  from the two largest columns of `B V` and their cross product (no division by the smallest
+  singular value; `det B < 0` and rank-deficient `B` included), and Shepperd's extraction.
+  `B` is first scaled by an exact power of two, so the result does not depend on its scale.
   On the CPU the batch runs in cache-sized chunks (every intermediate stays in cache).
-* Derivative: from the 3x3 problem, ``dv = v (x) (w / 2, 0)`` with ``(tr(H) I - H) w =
-  vee(Q^T dB - dB^T Q)``, ``H = Q^T B``, written as a differentiable expression of ``B`` (see
-  :func:`_top_jvp`), so second derivatives are exact where the top eigenvalue is simple,
+* Derivative: from the 3x3 problem, `dv = v (x) (w / 2, 0)` with `(tr(H) I - H) w =
+  vee(Q^T dB - dB^T Q)`, `H = Q^T B`, written as a differentiable expression of `B` (see
+  `_top_jvp`), so second derivatives are exact where the top eigenvalue is simple,
   including at ties among the lower ones (exact rotations, identical means).
 """
 
@@ -54,20 +54,20 @@ _CHUNK = {jnp.dtype(jnp.float32): 2**16, jnp.dtype(jnp.float64): 2**15}
 
 
 def _schedule(dtype):
-    """The kernel's Jacobi rotations, in order, as column pairs (see ``_SWEEPS``)."""
+    """The kernel's Jacobi rotations, in order, as column pairs (see `_SWEEPS`)."""
     return _PAIRS * (_SWEEPS[jnp.dtype(dtype)] - 1) + _PAIRS[:2]
 
 
 def _pow2_factors(m):
-    """Two exact powers of two per batch element, ``(f0, f1)``, such that ``m * f0 * f1`` lies in
-    ``[1/2, 1)`` for ``m`` the largest ``|entry|`` of each batch element; NaN where ``m`` is not
-    finite, 1 where ``m = 0``. Applied one after the other (their product can overflow).
+    """Two exact powers of two per batch element, `(f0, f1)`, such that `m * f0 * f1` lies in
+    `[1/2, 1)` for `m` the largest `|entry|` of each batch element; NaN where `m` is not
+    finite, 1 where `m = 0`. Applied one after the other (their product can overflow).
 
-    ``m`` is first brought within ``2^+-k`` (``k`` half the exponent range) by a constant power
-    of two ``f0``, then ``2^E`` of the result, read from its exponent bits, is inverted by one
+    `m` is first brought within `2^+-k` (`k` half the exponent range) by a constant power
+    of two `f0`, then `2^E` of the result, read from its exponent bits, is inverted by one
     division, exact for a power of two. Both factors come from that one quotient, so XLA
     computes them once per batch element, in a loop of their own, and each scaled entry costs
-    two multiplications (``frexp`` and ``ldexp`` are chains of cheap operations that XLA would
+    two multiplications (`frexp` and `ldexp` are chains of cheap operations that XLA would
     repeat for each entry of every loop that reads the scaled array)."""
     dt = m.dtype
     info = jnp.finfo(dt)
@@ -86,9 +86,9 @@ def _pow2_factors(m):
 
 
 def pow2_factors(x, axes):
-    """The factors ``(f0, f1)`` (each of the batch shape of ``x``, without ``axes``) by which
-    :func:`pow2_scale` multiplies ``x``, for callers that apply them inside their own products:
-    ``(x * f0) * f1`` is exact."""
+    """The factors `(f0, f1)` (each of the batch shape of `x`, without `axes`) by which
+    `pow2_scale` multiplies `x`, for callers that apply them inside their own products:
+    `(x * f0) * f1` is exact."""
     n = len(axes)
     if sorted(a % x.ndim for a in axes) != list(range(x.ndim - n, x.ndim)):
         raise ValueError(f"axes must be the trailing axes, got {axes} for shape {x.shape}")
@@ -103,29 +103,29 @@ def pow2_factors(x, axes):
 
 
 def pow2_scale(x, axes):
-    """``x`` times an exact power of two per batch element, so that the largest ``|entry|`` over
-    the trailing ``axes`` lies in ``[1/2, 1)``; no rounding. Zero stays zero; a non-finite entry
+    """`x` times an exact power of two per batch element, so that the largest `|entry|` over
+    the trailing `axes` lies in `[1/2, 1)`; no rounding. Zero stays zero; a non-finite entry
     gives NaN over the whole element."""
     f0, f1 = (f.reshape(*f.shape, *(1,) * len(axes)) for f in pow2_factors(x, axes))
     return x * f0 * f1
 
 
 def _rotation(app, aqq, apq):
-    """``(c, s)`` of a Jacobi rotation that zeroes ``a_pq`` of the symmetric 2x2
-    ``[[a_pp, a_pq], [a_pq, a_qq]]`` and leaves the larger diagonal entry first: a sorting
+    """`(c, s)` of a Jacobi rotation that zeroes `a_pq` of the symmetric 2x2
+    `[[a_pp, a_pq], [a_pq, a_qq]]` and leaves the larger diagonal entry first: a sorting
     rotation, so that the columns end in decreasing order of norm.
 
-    ``t = tan(theta)`` is the smaller root of ``t^2 + 2 tau t - 1 = 0``, ``tau = (a_qq - a_pp) /
-    (2 a_pq)`` (Golub & Van Loan 8.5.2), written ``t = 2 a_pq / (d + sign(d) r)``, ``d = a_qq -
-    a_pp``, ``r = sqrt(d^2 + 4 a_pq^2)``: it gives ``a_pp' = a_pp - t a_pq``, larger than
-    ``a_qq'`` where ``d < 0``. Elsewhere the rotation is by ``theta + pi/2``, ``t = -(d + r) /
-    (2 a_pq)``, which swaps the two results; ``|t|`` is capped at ``1 / eps^2`` (a swap to below
-    the rounding level), which is also ``t`` for ``a_pq = 0 < d``.
+    `t = tan(theta)` is the smaller root of `t^2 + 2 tau t - 1 = 0`, `tau = (a_qq - a_pp) /
+    (2 a_pq)` (Golub & Van Loan 8.5.2), written `t = 2 a_pq / (d + sign(d) r)`, `d = a_qq -
+    a_pp`, `r = sqrt(d^2 + 4 a_pq^2)`: it gives `a_pp' = a_pp - t a_pq`, larger than
+    `a_qq'` where `d < 0`. Elsewhere the rotation is by `theta + pi/2`, `t = -(d + r) /
+    (2 a_pq)`, which swaps the two results; `|t|` is capped at `1 / eps^2` (a swap to below
+    the rounding level), which is also `t` for `a_pq = 0 < d`.
 
-    Each choice is made inside the one quotient ``t``, and ``c`` and ``s`` come from it: XLA
-    recomputes cheap expressions in every loop that uses them, and a sign of ``d`` taken twice
-    at ``d ~ 0`` (an exact rotation) could differ between the loops that update the two columns.
-    ``c = sqrt(1 / (1 + t^2))``, as XLA:CPU compiles ``rsqrt`` to a slow loop."""
+    Each choice is made inside the one quotient `t`, and `c` and `s` come from it: XLA
+    recomputes cheap expressions in every loop that uses them, and a sign of `d` taken twice
+    at `d ~ 0` (an exact rotation) could differ between the loops that update the two columns.
+    `c = sqrt(1 / (1 + t^2))`, as XLA:CPU compiles `rsqrt` to a slow loop."""
     d = aqq - app
     r = jnp.sqrt(d * d + 4.0 * apq * apq)
     keep = d < 0
@@ -149,8 +149,8 @@ def _cross3(x, y):
 
 
 def _unit_or(w, fallback):
-    """``w / |w|``, or ``fallback`` where ``|w|^2`` is zero or below the normal range, whose
-    reciprocal could overflow (NaN there for ``fallback=None``)."""
+    """`w / |w|`, or `fallback` where `|w|^2` is zero or below the normal range, whose
+    reciprocal could overflow (NaN there for `fallback=None`)."""
     n = _dot3(w, w)
     ok = n >= jnp.finfo(n.dtype).tiny  # NaN is not
     inv = jnp.sqrt(1.0 / jnp.where(ok, n, 1.0))
@@ -160,8 +160,8 @@ def _unit_or(w, fallback):
 
 
 def _perpendicular(u):
-    """A unit vector perpendicular to the unit ``u``: ``u x e_k`` normalised, ``e_k`` the axis
-    of ``u``'s smallest component (so ``|u x e_k|^2 >= 2/3``)."""
+    """A unit vector perpendicular to the unit `u`: `u x e_k` normalised, `e_k` the axis
+    of `u`'s smallest component (so `|u x e_k|^2 >= 2/3`)."""
     a = [jnp.abs(x) for x in u]
     k0 = (a[0] <= a[1]) & (a[0] <= a[2])  # comparisons fuse; an argmin is a loop of its own
     k1 = ~k0 & (a[1] <= a[2])
@@ -176,18 +176,18 @@ def _perpendicular(u):
 
 
 def _polar(B, nan_at_zero=True):
-    """Scalar-last unit quaternion (``w >= 0``, or ``|w| <= 4 eps`` and the largest component
-    positive) of the rotation ``Q`` maximising ``tr(Q^T B)`` for ``(..., 3, 3)`` ``B``, ``Q``,
-    and ``(V, s)``: the right singular vectors ``(..., 3, 3)``
-    (columns) and the singular values ``(..., 3)`` of ``B`` scaled by :func:`pow2_scale`, the
-    last one negative where ``det B < 0`` (``Q^T B = V diag(s) V^T``). XLA drops the outputs a
-    caller does not use. ``B = 0`` gives NaN, or with ``nan_at_zero=False`` some rotation.
+    """Scalar-last unit quaternion (`w >= 0`, or `|w| <= 4 eps` and the largest component
+    positive) of the rotation `Q` maximising `tr(Q^T B)` for `(..., 3, 3)` `B`, `Q`,
+    and `(V, s)`: the right singular vectors `(..., 3, 3)`
+    (columns) and the singular values `(..., 3)` of `B` scaled by `pow2_scale`, the
+    last one negative where `det B < 0` (`Q^T B = V diag(s) V^T`). XLA drops the outputs a
+    caller does not use. `B = 0` gives NaN, or with `nan_at_zero=False` some rotation.
 
-    One-sided Jacobi: the columns of ``W = B V`` are rotated in pairs until orthogonal, the
-    rotations accumulated in ``V``; both are rows of one ``(..., 6, 3)`` state, so each rotation
-    is one loop over it. The rotations sort the columns (:func:`_rotation`), so the first two
-    are the largest, and ``Q = u_a v_a^T + u_b v_b^T + (u_a x u_b)(v_a x v_b)^T`` from them,
-    ``u = w / |w|``: a rotation, whatever the sign of ``det B``.
+    One-sided Jacobi: the columns of `W = B V` are rotated in pairs until orthogonal, the
+    rotations accumulated in `V`; both are rows of one `(..., 6, 3)` state, so each rotation
+    is one loop over it. The rotations sort the columns (`_rotation`), so the first two
+    are the largest, and `Q = u_a v_a^T + u_b v_b^T + (u_a x u_b)(v_a x v_b)^T` from them,
+    `u = w / |w|`: a rotation, whatever the sign of `det B`.
     """
     Bs = pow2_scale(B, (-2, -1))
     eye = jnp.broadcast_to(jnp.eye(3, dtype=B.dtype), Bs.shape)
@@ -227,7 +227,7 @@ def _polar(B, nan_at_zero=True):
 
 
 def _by_chunks(fn, B):
-    """``fn`` over the ``(..., 3, 3)`` batch ``B``; on the CPU in chunks of ``_CHUNK`` (padded
+    """`fn` over the `(..., 3, 3)` batch `B`; on the CPU in chunks of `_CHUNK` (padded
     with identities), elsewhere in one piece."""
     batch = B.shape[:-2]
     n = math.prod(batch)
@@ -249,8 +249,8 @@ def _by_chunks(fn, B):
 
 
 def _k_to_b(K):
-    """The ``(..., 3, 3)`` ``B`` with ``davenport_k(B) = K - (tr K / 4) I`` for the symmetric
-    part of ``(..., 4, 4)`` ``K`` (the inverse of :func:`davenport_k` on traceless matrices)."""
+    """The `(..., 3, 3)` `B` with `davenport_k(B) = K - (tr K / 4) I` for the symmetric
+    part of `(..., 4, 4)` `K` (the inverse of `davenport_k` on traceless matrices)."""
 
     def k(i, j):
         return 0.5 * K[..., i, j] + 0.5 * K[..., j, i]
@@ -275,30 +275,30 @@ def _check(K):
 
 @jax.custom_jvp
 def _top(B, q, aux):
-    """``q``, the top eigenvector of ``davenport_k(B)`` computed by the caller with ``aux``, the
-    kernel's ``(V, s)`` for ``B``, differentiated as that function of ``B``."""
+    """`q`, the top eigenvector of `davenport_k(B)` computed by the caller with `aux`, the
+    kernel's `(V, s)` for `B`, differentiated as that function of `B`."""
     del B, aux
     return q
 
 
 def _run(B, nan_at_zero=True):
-    """The kernel's ``(q, Q, (V, s))`` for ``B`` (:func:`_polar`, by chunks), as constants: the
-    derivative rules take ``(V, s)`` from this same run, so that a derivative needs no second
+    """The kernel's `(q, Q, (V, s))` for `B` (`_polar`, by chunks), as constants: the
+    derivative rules take `(V, s)` from this same run, so that a derivative needs no second
     one; where nothing is differentiated they are unused, and XLA drops them."""
     polar = functools.partial(_polar, nan_at_zero=nan_at_zero)
     return jax.lax.stop_gradient(_by_chunks(polar, B))
 
 
 def _nearest(B, nan_at_zero=True):
-    """The kernel's top eigenvector of ``davenport_k(B)``, differentiable (:func:`_top_jvp`)."""
+    """The kernel's top eigenvector of `davenport_k(B)`, differentiable (`_top_jvp`)."""
     q, _, aux = _run(B, nan_at_zero)
     return _top(B, q, aux)
 
 
 @jax.custom_jvp
 def _top_matrix(B, q, aux, Q):
-    """``Q``, the rotation of ``_top(B, q, aux)`` computed by the kernel, differentiated as
-    ``_to_matrix(_top(B, q, aux))``."""
+    """`Q`, the rotation of `_top(B, q, aux)` computed by the kernel, differentiated as
+    `_to_matrix(_top(B, q, aux))`."""
     del B, q, aux
     return Q
 
@@ -310,21 +310,21 @@ def _top_matrix_jvp(primals, tangents):
 
 
 def nearest_rotation(B):
-    """The rotation matrix ``R`` maximising ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B`` (the
+    """The rotation matrix `R` maximising `tr(R^T B)` for a `(..., 3, 3)` `B` (the
     special-orthogonal polar factor), as the kernel forms it; differentiated as the matrix of
-    :func:`nearest_quaternion`. NaN where ``B`` is zero or not finite."""
+    `nearest_quaternion`. NaN where `B` is zero or not finite."""
     q, Q, aux = _run(B)
     return _top_matrix(B, q, aux, Q)
 
 
 def top_eigenvector(K):
-    """Unit eigenvector ``(..., 4)`` of the largest eigenvalue of the symmetric part of a
-    ``(..., 4, 4)`` ``K``.
+    """Unit eigenvector `(..., 4)` of the largest eigenvalue of the symmetric part of a
+    `(..., 4, 4)` `K`.
 
-    The last component is ``>= 0`` (within ``4 eps`` of 0 the largest component is positive
+    The last component is `>= 0` (within `4 eps` of 0 the largest component is positive
     instead, so that rounding does not flip the sign). Where the top eigenvalue is simple the
     result is accurate to a few eps divided by the relative gap to the next one, at any finite
-    scale of ``K``; a non-finite entry gives NaN; a multiple of ``I`` gives a unit vector (every
+    scale of `K`; a non-finite entry gives NaN; a multiple of `I` gives a unit vector (every
     vector is an eigenvector).
 
     Derivative: exact while the top eigenvalue is simple, and differentiable again (second
@@ -355,8 +355,8 @@ def _top_jvp(primals, tangents):
     Q = _to_matrix(v)
 
     def qt(X, i, j):
-        """``(Q^T X)_ij`` as a sum of per-element terms: XLA:CPU compiles a reduction over a
-        small trailing axis (``jnp.sum``, ``einsum``) to a slow kernel of its own."""
+        """`(Q^T X)_ij` as a sum of per-element terms: XLA:CPU compiles a reduction over a
+        small trailing axis (`jnp.sum`, `einsum`) to a slow kernel of its own."""
         return sum(Q[..., k, i] * X[..., k, j] for k in range(3))
 
     H = [[qt(Bs, i, j) for j in range(3)] for i in range(3)]
@@ -385,13 +385,13 @@ def _top_jvp(primals, tangents):
 
 
 def davenport_k(B):
-    """Davenport's symmetric ``(..., 4, 4)`` ``K`` (scalar-last quaternions) of a ``(..., 3, 3)``
-    ``B``: ``q^T K q = tr(R(q)^T B)`` for unit ``q`` (active ``R``). Linear in ``B``.
+    """Davenport's symmetric `(..., 4, 4)` `K` (scalar-last quaternions) of a `(..., 3, 3)`
+    `B`: `q^T K q = tr(R(q)^T B)` for unit `q` (active `R`). Linear in `B`.
 
-    For ``B`` the attitude profile ``sum_i w_i a_i b_i^T`` its top eigenvector solves Wahba's
-    problem (Davenport's q-method; Markley & Crassidis 2014, Sec. 5.5.3); for ``B`` any 3x3
-    matrix it is the quaternion of the rotation nearest to ``B`` in the Frobenius norm, since
-    ``||R - B||^2 = 3 + ||B||^2 - 2 tr(R^T B)`` (Bar-Itzhack 2000).
+    For `B` the attitude profile `sum_i w_i a_i b_i^T` its top eigenvector solves Wahba's
+    problem (Davenport's q-method; Markley & Crassidis 2014, Sec. 5.5.3); for `B` any 3x3
+    matrix it is the quaternion of the rotation nearest to `B` in the Frobenius norm, since
+    `||R - B||^2 = 3 + ||B||^2 - 2 tr(R^T B)` (Bar-Itzhack 2000).
     """
     b = [[B[..., i, j] for j in range(3)] for i in range(3)]
     tr = b[0][0] + b[1][1] + b[2][2]
@@ -407,8 +407,8 @@ def davenport_k(B):
 
 
 def nearest_quaternion(B):
-    """Scalar-last unit quaternion ``(..., 4)``, ``w >= 0`` (see :func:`top_eigenvector` for
-    ``|w| <= 4 eps``), of the rotation ``R`` maximising
-    ``tr(R^T B)`` for a ``(..., 3, 3)`` ``B``: the nearest rotation to ``B``, ``det B < 0``
-    included. NaN where ``B`` is zero or not finite. Independent of the scale of ``B``."""
+    """Scalar-last unit quaternion `(..., 4)`, `w >= 0` (see `top_eigenvector` for
+    `|w| <= 4 eps`), of the rotation `R` maximising
+    `tr(R^T B)` for a `(..., 3, 3)` `B`: the nearest rotation to `B`, `det B < 0`
+    included. NaN where `B` is zero or not finite. Independent of the scale of `B`."""
     return _nearest(B)

@@ -7,6 +7,8 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._matrix import _selected_column
 from ._numerics import (
@@ -33,8 +35,8 @@ def parse_seq(seq) -> tuple[tuple[int, int, int], bool]:
     """Parse an Euler sequence string.
 
     Returns:
-        ``(axes, intrinsic)``: axis indices (0=x, 1=y, 2=z) in the order the angles are given,
-        and whether the rotations are about the rotating (body) axes.
+        `(axes, intrinsic)`: axis indices (0=x, 1=y, 2=z) in the order the angles are given,
+            and whether the rotations are about the rotating (body) axes.
 
     Raises:
         ValueError: for anything but the 24 letter forms and the 12 digit forms.
@@ -65,7 +67,7 @@ def _prep_angles(angles, degrees):
 
 
 def _elementary(axis: int, angle):
-    """Scalar-last quaternion of a rotation by ``angle`` about coordinate axis ``axis``."""
+    """Scalar-last quaternion of a rotation by `angle` about coordinate axis `axis`."""
     half = angle / 2
     s, c = jnp.sin(half), jnp.cos(half)
     z = jnp.zeros_like(s)
@@ -115,10 +117,10 @@ _TAN_PI_8 = 0.41421356237309503
 
 @jax.custom_jvp
 def _atan2(y, x):
-    """``atan2(y, x)`` for float32/float64, branch-free; 0 (not NaN) at ``x = y = 0``.
+    """`atan2(y, x)` for float32/float64, branch-free; 0 (not NaN) at `x = y = 0`.
 
-    Signed zeros follow IEEE ``atan2`` except at the origin, which gives 0 like
-    :func:`rotjax._numerics.safe_atan2`.
+    Signed zeros follow IEEE `atan2` except at the origin, which gives 0 like
+    `safe_atan2`.
     """
     size = jnp.dtype(x.dtype).itemsize
     ax, ay = jnp.abs(x), jnp.abs(y)
@@ -175,16 +177,16 @@ def _euler_to_quat(a, seq):
 
 
 def _scaled_pair(u, v):
-    """``(u s, v s, s)`` for the power of two ``s`` (exact, no derivative) that brings the
-    larger of ``|u|``, ``|v|`` into ``[1, 2)``: their squares then neither underflow nor
+    """`(u s, v s, s)` for the power of two `s` (exact, no derivative) that brings the
+    larger of `|u|`, `|v|` into `[1, 2)`: their squares then neither underflow nor
     overflow."""
     s, _ = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
     return u * s, v * s, s
 
 
 def _lifted(u, v):
-    """The pair times ``2^k`` (exact), ``k`` half the exponent range, where both are below
-    ``2^-k``: products with components of order 1 down to eps then stay normal."""
+    """The pair times `2^k` (exact), `k` half the exponent range, where both are below
+    `2^-k`: products with components of order 1 down to eps then stay normal."""
     k = 2 ** (jnp.finfo(u.dtype).nexp - 2)
     low = jnp.maximum(jnp.abs(u), jnp.abs(v)) < 2.0**-k
     f = select(low, 2.0**k, 1.0, u.dtype)
@@ -192,11 +194,11 @@ def _lifted(u, v):
 
 
 def _hypot(u, v):
-    """``sqrt(u^2 + v^2)`` at any scale (the pair is scaled by a power of two first: the
-    modulus of ``(1e-160, 0)`` is ``1e-160``, not 0), with a finite (zero) gradient at the
+    """`sqrt(u^2 + v^2)` at any scale (the pair is scaled by a power of two first: the
+    modulus of `(1e-160, 0)` is `1e-160`, not 0), with a finite (zero) gradient at the
     origin (double where).
 
-    Written on the two scalars rather than as ``safe_norm`` of a stacked pair: XLA:CPU turns
+    Written on the two scalars rather than as `safe_norm` of a stacked pair: XLA:CPU turns
     that reduction into separate loops.
     """
     s, inv = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
@@ -208,10 +210,10 @@ def _hypot(u, v):
 
 @functools.cache
 def _algorithm_axes(seq):
-    """``(i, j, k, sign)`` of Bernardes & Viollet's algorithm for ``seq``: the axes of the
+    """`(i, j, k, sign)` of Bernardes & Viollet's algorithm for `seq`: the axes of the
     equivalent extrinsic sequence (an intrinsic sequence equals the reversed extrinsic one with
-    the angles in reverse order), ``k`` the remaining axis for a proper Euler sequence, and
-    ``sign`` +1 if ``(i, j, k)`` is an even permutation of ``(x, y, z)``, else -1."""
+    the angles in reverse order), `k` the remaining axis for a proper Euler sequence, and
+    `sign` +1 if `(i, j, k)` is an even permutation of `(x, y, z)`, else -1."""
     axes, intrinsic = parse_seq(seq)
     i, j, k = axes[::-1] if intrinsic else axes
     if i == k:
@@ -220,8 +222,8 @@ def _algorithm_axes(seq):
 
 
 def _abcd(x, y, z, w, seq):
-    """The two complex factors ``A = a + ib`` and ``C = c + id`` of Bernardes & Viollet's
-    algorithm (before any scaling), linear in the quaternion's components: used for ``q`` and,
+    """The two complex factors `A = a + ib` and `C = c + id` of Bernardes & Viollet's
+    algorithm (before any scaling), linear in the quaternion's components: used for `q` and,
     in the derivative, for its tangent."""
     i, j, k, s = _algorithm_axes(seq)
     v = (x, y, z)
@@ -231,16 +233,16 @@ def _abcd(x, y, z, w, seq):
 
 
 def is_proper(seq) -> bool:
-    """Whether ``seq`` is a proper Euler sequence (first and third axes equal, e.g. ``"ZXZ"``)
-    rather than a Tait-Bryan one (three distinct axes); raises ``ValueError`` like
-    :func:`parse_seq` for an invalid ``seq``."""
+    """Whether `seq` is a proper Euler sequence (first and third axes equal, e.g. `"ZXZ"`)
+    rather than a Tait-Bryan one (three distinct axes); raises `ValueError` like
+    `parse_seq` for an invalid `seq`."""
     axes, _ = parse_seq(seq)
     return axes[0] == axes[2]
 
 
 @functools.cache
 def _layout(seq):
-    """Per output angle (in ``seq``'s order): its name, factor and shift (see below)."""
+    """Per output angle (in `seq`'s order): its name, factor and shift (see below)."""
     _, intrinsic = parse_seq(seq)
     proper = is_proper(seq)
     factor = {"first": 1.0, "mid": 2.0, "third": 1.0 if proper else float(_algorithm_axes(seq)[3])}
@@ -251,7 +253,7 @@ def _layout(seq):
 
 def _factors(x, y, z, w, seq):
     """From the quaternion's components (arrays of any one shape): the power-of-two scale, the
-    scaled factors ``(a, b, c, d)``, the same after the lock substitution, the lock masks, and
+    scaled factors `(a, b, c, d)`, the same after the lock substitution, the lock masks, and
     where the quaternion is zero or not finite."""
     _, intrinsic = parse_seq(seq)
     # Scale by a power of two (exact) so that the largest component is in [1, 2): the
@@ -301,7 +303,7 @@ _LAST = np.array([False, False, True])
 def _quat_to_euler(q, seq):
     """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold.
 
-    ``q`` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
+    `q` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
     """
     _, (a, b, c, d), _, locks, bad = _factors(*(q[..., n] for n in range(4)), seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
@@ -327,34 +329,34 @@ def _quat_to_euler(q, seq):
 
 @functools.cache
 def _abcd_patterns(seq):
-    """``(4, 4)``: row ``t`` holds the coefficients of ``(a, b, c, d)[t]`` on ``(x, y, z, w)``."""
+    """`(4, 4)`: row `t` holds the coefficients of `(a, b, c, d)[t]` on `(x, y, z, w)`."""
     return np.array(_abcd(*np.eye(4), seq), dtype=float)
 
 
 def _euler_jacobian(comps, seq, width, patterns):
-    """The three angles' derivatives (in output order) as ``(..., width)`` arrays ``J`` such
-    that ``d angle = sum(J * dx, axis=-1)`` for a tangent ``dx`` of ``width`` components.
+    """The three angles' derivatives (in output order) as `(..., width)` arrays `J` such
+    that `d angle = sum(J * dx, axis=-1)` for a tangent `dx` of `width` components.
 
-    ``comps`` are the quaternion's four components (per-rotation arrays, any norm).
-    ``patterns(wide)`` gives the derivatives of the unscaled ``(a, b, c, d)`` with respect to
-    ``dx``, four arrays that broadcast against ``wide``, the components broadcast to
-    ``(..., width)``.
+    `comps` are the quaternion's four components (per-rotation arrays, any norm).
+    `patterns(wide)` gives the derivatives of the unscaled `(a, b, c, d)` with respect to
+    `dx`, four arrays that broadcast against `wide`, the components broadcast to
+    `(..., width)`.
 
     The outer angles are arg(A) -+ arg(C), with derivatives Im(conj(A) dA) / |A|^2 and
     Im(conj(C) dC) / |C|^2 (after the lock substitution); the middle one is
     2 atan2(|C|, |A|), with derivative 2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) and
     d|C| = C.dC / |C|, taken as 0 where C = 0 (at lock the middle angle sits at the edge of its
     range, a kink: the minimum-norm subgradient, as _hypot's). Near lock one factor is tiny:
-    each is scaled by its own power of two before it is squared (:func:`_scaled_pair`), so the
+    each is scaled by its own power of two before it is squared (`_scaled_pair`), so the
     derivatives, about 1 / distance, stay right down to the lock threshold rather than
     dividing by an underflowed |C|^2.
 
-    Written for reverse mode, whose transpose of ``sum(J * dx)`` is one elementwise loop over
-    the cotangent of ``dx`` (17 XLA loops became 3 for quaternion_to_euler):
+    Written for reverse mode, whose transpose of `sum(J * dx)` is one elementwise loop over
+    the cotangent of `dx` (17 XLA loops became 3 for quaternion_to_euler):
 
     * the three divisions are per rotation, stacked and written by one loop (the barrier keeps
       XLA from turning the stack back into three arrays, each written by a loop of its own);
-    * the rest is computed again on ``(..., width)`` arrays, each component of ``q`` broadcast
+    * the rest is computed again on `(..., width)` arrays, each component of `q` broadcast
       once: XLA:CPU then fuses it into one loop (broadcasting each value at every use
       multiplied the code that fusion would emit, and XLA wrote the inputs out instead).
     """
@@ -427,63 +429,86 @@ def _matrix_to_euler(R, seq):
 
 
 @public
-def euler_to_quaternion(angles, seq: str, degrees: bool = False, scalar_first: bool = False):
+def euler_to_quaternion(
+    angles: ArrayLike, seq: str, degrees: bool = False, scalar_first: bool = False
+) -> Array:
     """Quaternion of Euler angles.
 
     Args:
-        angles: ``(..., 3)`` angles, in the order of ``seq``; any values (no range is required).
-        seq: ``"XYZ"``-style intrinsic (rotating axes), ``"xyz"``-style extrinsic (fixed axes),
-            or digits ``"123"``/``"313"`` (intrinsic). Intrinsic ``"XYZ"`` (Bryant angles) is
-            ``R = Rx(a0) @ Ry(a1) @ Rz(a2)``; extrinsic ``"xyz"`` is
-            ``R = Rz(a2) @ Ry(a1) @ Rx(a0)``.
+        angles: `(..., 3)` angles, in the order of `seq`; any values (no range is required).
+        seq: `"XYZ"`-style intrinsic (rotating axes), `"xyz"`-style extrinsic (fixed axes),
+            or digits `"123"`/`"313"` (intrinsic). Intrinsic `"XYZ"` (Bryant angles) is
+            `R = Rx(a0) @ Ry(a1) @ Rz(a2)`; extrinsic `"xyz"` is
+            `R = Rz(a2) @ Ry(a1) @ Rx(a0)`.
         degrees: angles are in degrees.
-        scalar_first: return ``(w, x, y, z)``.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion (product of the three elementary quaternions; no hemisphere
-        is imposed, so the map is smooth in the angles).
+        `(..., 4)` unit quaternion (product of the three elementary quaternions; no hemisphere
+            is imposed, so the map is smooth in the angles).
 
     Raises:
-        ValueError: for an invalid ``seq``, or if ``angles`` is not ``(..., 3)``.
+        ValueError: for an invalid `seq`, or if `angles` is not `(..., 3)`.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = rj.euler_to_quaternion([90.0, 0.0, 0.0], "ZYX", degrees=True)  # yaw 90 deg
+        print(q.round(6))
+        # [0.       0.       0.707107 0.707107]
+        ```
     """
     a, dt = _prep_angles(angles, degrees)
     return from_scalar_last(_euler_to_quat(a, seq), scalar_first).astype(dt)
 
 
 @public
-def euler_to_matrix(angles, seq: str, degrees: bool = False):
+def euler_to_matrix(angles: ArrayLike, seq: str, degrees: bool = False) -> Array:
     """Rotation matrix of Euler angles.
 
     Args:
-        angles: ``(..., 3)`` angles in the order of ``seq``.
-        seq: axis sequence; see :func:`euler_to_quaternion`.
+        angles: `(..., 3)` angles in the order of `seq`.
+        seq: axis sequence; see [`euler_to_quaternion`][rotjax.euler_to_quaternion].
         degrees: angles are in degrees.
 
     Returns:
-        ``(..., 3, 3)`` active rotation matrix, e.g. ``Rz(a0) @ Rx(a1) @ Rz(a2)`` for ``"ZXZ"``
-        (Nikravesh's ``A = D C B``, Eq. A.1).
+        `(..., 3, 3)` active rotation matrix, e.g. `Rz(a0) @ Rx(a1) @ Rz(a2)` for `"ZXZ"`
+            (Nikravesh's `A = D C B`, Eq. A.1).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.euler_to_matrix([90.0, 90.0, 0.0], "ZXZ", degrees=True).round(6))
+        # [[0. 0. 1.]
+        #  [1. 0. 0.]
+        #  [0. 1. 0.]]
+        ```
     """
     a, dt = _prep_angles(angles, degrees)
     return _to_matrix(_euler_to_quat(a, seq)).astype(dt)
 
 
 @public
-def quaternion_to_euler(q, seq: str, degrees: bool = False, scalar_first: bool = False):
+def quaternion_to_euler(
+    q: ArrayLike, seq: str, degrees: bool = False, scalar_first: bool = False
+) -> Array:
     """Euler angles of a quaternion (Bernardes & Viollet 2022, with no lock threshold).
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit (zero gives NaN).
-        seq: axis sequence; see :func:`euler_to_quaternion`.
+        q: `(..., 4)` quaternion; need not be unit (zero gives NaN).
+        seq: axis sequence; see [`euler_to_quaternion`][rotjax.euler_to_quaternion].
         degrees: return degrees.
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 3)`` angles as scipy's ``as_euler``: first and third in ``[-pi, pi]``; middle in
-        ``[0, pi]`` for proper Euler sequences (first axis = third axis) and in
-        ``[-pi/2, pi/2]`` for Tait-Bryan sequences.
+        `(..., 3)` angles as scipy's `as_euler`: first and third in `[-pi, pi]`; middle in
+            `[0, pi]` for proper Euler sequences (first axis = third axis) and in
+            `[-pi/2, pi/2]` for Tait-Bryan sequences.
 
     Note:
-        Every angle is an atan2 of exact polynomial expressions in ``q``: no ``asin``/``acos``
+        Every angle is an atan2 of exact polynomial expressions in `q`: no `asin`/`acos`
         and no gimbal-lock threshold, so the angles reproduce the rotation to a few eps
         everywhere, at and near gimbal lock included (scipy switches formula at a 1e-7
         threshold, which moves the rotation by up to ~2e-7 rad). The atan2 is a branch-free
@@ -495,7 +520,7 @@ def quaternion_to_euler(q, seq: str, degrees: bool = False, scalar_first: bool =
         float32) only the sum or difference of the outer angles is defined. The third angle
         is then returned as 0 and the first carries the whole rotation, like scipy.
 
-        *Scale.* ``q`` need not be unit: any finite non-zero scale gives the same angles (an
+        *Scale.* `q` need not be unit: any finite non-zero scale gives the same angles (an
         exact power-of-two prescaling); zero, infinite or NaN components give NaN.
 
         *Gradient rule.* Near lock the gradient is the true derivative (it grows like
@@ -505,6 +530,17 @@ def quaternion_to_euler(q, seq: str, degrees: bool = False, scalar_first: bool =
         of the defined sum/difference, the third angle gets 0, and the middle angle, which sits
         at a kink (the edge of its range), gets 0 (the minimum-norm subgradient). All are
         finite.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = rj.euler_to_quaternion([30.0, 20.0, 10.0], "ZYX", degrees=True)
+        print(rj.quaternion_to_euler(q, "ZYX", degrees=True).round(4))
+        # [30. 20. 10.]
+        print(rj.quaternion_to_euler(q, "xyz", degrees=True).round(4))  # extrinsic, reversed
+        # [10. 20. 30.]
+        ```
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
@@ -516,25 +552,35 @@ def quaternion_to_euler(q, seq: str, degrees: bool = False, scalar_first: bool =
 
 
 @public
-def matrix_to_euler(R, seq: str, degrees: bool = False):
-    """Euler angles of a rotation matrix (via the branch-free quaternion, no ``asin``/``acos``).
+def matrix_to_euler(R: ArrayLike, seq: str, degrees: bool = False) -> Array:
+    """Euler angles of a rotation matrix (via the branch-free quaternion, no `asin`/`acos`).
 
     Args:
-        R: ``(..., 3, 3)`` active rotation matrix.
-        seq: axis sequence; see :func:`euler_to_quaternion`.
+        R: `(..., 3, 3)` active rotation matrix.
+        seq: axis sequence; see [`euler_to_quaternion`][rotjax.euler_to_quaternion].
         degrees: return degrees.
 
     Returns:
-        ``(..., 3)`` angles in scipy's ranges; see :func:`quaternion_to_euler` for the ranges,
-        the behaviour at gimbal lock and the gradient rule.
+        `(..., 3)` angles in scipy's ranges; see [`quaternion_to_euler`][rotjax.quaternion_to_euler]
+            for the ranges, the behaviour at gimbal lock and the gradient rule.
 
     Note:
-        Computed as :func:`quaternion_to_euler` of :func:`matrix_to_quaternion`'s
-        ``"shepperd"`` quaternion: scale invariant (any ``s R``, ``s > 0``, from 1e-30 to 1e30
-        in float32, 1e-300 to 1e300 in float64), NaN for the zero matrix or a non-finite entry.
-        The gradient is the derivative of the function computed, in every 3x3 direction, on
-        and off SO(3) (see :func:`matrix_to_quaternion`), with the gimbal-lock rule of
-        :func:`quaternion_to_euler`.
+        Computed as [`quaternion_to_euler`][rotjax.quaternion_to_euler] of
+        [`matrix_to_quaternion`][rotjax.matrix_to_quaternion]'s `"shepperd"` quaternion: scale
+        invariant (any `s R`, `s > 0`, from 1e-30 to 1e30 in float32, 1e-300 to 1e300 in float64),
+        NaN for the zero matrix or a non-finite entry. The gradient is the derivative of the
+        function computed, in every 3x3 direction, on and off SO(3) (see
+        [`matrix_to_quaternion`][rotjax.matrix_to_quaternion]), with the gimbal-lock rule of
+        [`quaternion_to_euler`][rotjax.quaternion_to_euler].
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        R = rj.euler_to_matrix([0.3, 1.1, -0.7], "313")  # Nikravesh's z-x-z angles
+        print(rj.matrix_to_euler(R, "313").round(6))
+        # [ 0.3  1.1 -0.7]
+        ```
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")

@@ -2,7 +2,7 @@
 Wahba's problem, averaging and interpolation.
 
 The 9D projection, Wahba's problem and the mean are each the top eigenvector of a symmetric 4x4
-matrix, computed by :func:`rotjax._eigen.top_eigenvector` (a one-sided Jacobi SVD of the
+matrix, computed by `top_eigenvector` (a one-sided Jacobi SVD of the
 equivalent 3x3 matrix, elementwise over the batch; exact first and second derivatives where
 the top eigenvalue is simple, finite at ties).
 """
@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._eigen import (
     _UNROLL_MAX,
@@ -45,7 +47,7 @@ def _einsum_outer(x, y):
 
 
 def _scaled(v, factors):
-    """``v`` times each factor in turn (exact for powers of two; their product could overflow)."""
+    """`v` times each factor in turn (exact for powers of two; their product could overflow)."""
     for f in factors:
         v = v * f
     return v
@@ -53,15 +55,15 @@ def _scaled(v, factors):
 
 @jax.custom_jvp
 def _sum_outer(x, y, fx, fy):
-    """``sum_n (x_n fx)(y_n fy)^T`` ``(..., p, r)`` for ``(..., N, p)`` and ``(..., N, r)``;
-    ``fx``, ``fy`` are tuples of constant per-batch-element factors (powers of two from
-    :func:`pow2_factors`, or empty), applied inside the products so that they can neither
+    """`sum_n (x_n fx)(y_n fy)^T` `(..., p, r)` for `(..., N, p)` and `(..., N, r)`;
+    `fx`, `fy` are tuples of constant per-batch-element factors (powers of two from
+    `pow2_factors`, or empty), applied inside the products so that they can neither
     underflow nor overflow.
 
     For a few vectors, a sum of broadcast outer products: one loop over the batch that reads
-    the inputs once (XLA:CPU runs a batched ``dot`` of such small matrices several times
+    the inputs once (XLA:CPU runs a batched `dot` of such small matrices several times
     slower, and scaled copies of the inputs would be written and read again); for many, an
-    ``einsum``. The derivative (:func:`_outer_tangent`) is written so that its transpose, the
+    `einsum`. The derivative (`_outer_tangent`) is written so that its transpose, the
     reverse mode, is elementwise too."""
     if not _unrolled(x, y):
         return _einsum_outer(*_scaled_pair(x, y, fx, fy))
@@ -74,7 +76,7 @@ def _unrolled(x, y):
 
 
 def _broadcast_batch(x, y, fx, fy):
-    """``x``, ``y`` and their factors broadcast to one batch shape."""
+    """`x`, `y` and their factors broadcast to one batch shape."""
     batch = jnp.broadcast_shapes(x.shape[:-2], y.shape[:-2])
     x, y = jnp.broadcast_to(x, batch + x.shape[-2:]), jnp.broadcast_to(y, batch + y.shape[-2:])
     fx, fy = ([jnp.broadcast_to(f, batch) for f in fs] for fs in (fx, fy))
@@ -86,10 +88,10 @@ def _scaled_pair(x, y, fx, fy):
 
 
 def _outer_tangent(x, y, dx, dy):
-    """``sum_n dx_n y_n^T + x_n dy_n^T`` for the unrolled case, as columns ``sum_n dx_n y_nj``
-    and rows ``sum_n x_ni dy_n``: whole vectors of the tangents times entries of the constants
-    ``x``, ``y``. The transpose (reverse mode) is then, per vector, the cotangent's columns or
-    rows times entries of ``x`` and ``y``: no reduction and no batched ``dot``. Each tangent
+    """`sum_n dx_n y_n^T + x_n dy_n^T` for the unrolled case, as columns `sum_n dx_n y_nj`
+    and rows `sum_n x_ni dy_n`: whole vectors of the tangents times entries of the constants
+    `x`, `y`. The transpose (reverse mode) is then, per vector, the cotangent's columns or
+    rows times entries of `x` and `y`: no reduction and no batched `dot`. Each tangent
     vector is sliced once: JAX transposes a slice into a pad of the whole cotangent, and XLA
     evaluates every pad of a sum at every entry."""
     n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
@@ -117,9 +119,9 @@ def _mT(x):
 
 
 def _svd_signed(M):
-    """SVD ``M = U diag(s) V^T`` with the sign of ``det`` moved into ``U[:, 2]`` and ``s[2]``.
+    """SVD `M = U diag(s) V^T` with the sign of `det` moved into `U[:, 2]` and `s[2]`.
 
-    Then ``U @ V^T`` is in SO(3) and ``s[2]`` is negative when ``det M < 0``.
+    Then `U @ V^T` is in SO(3) and `s[2]` is negative when `det M < 0`.
     """
     U, s, Vt = jnp.linalg.svd(M)
     d = jnp.sign(jnp.linalg.det(matmul(U, Vt)))  # exactly +-1 up to rounding: U, V are orthogonal
@@ -138,29 +140,39 @@ def _prep_pair(R_a, R_b):
 
 
 @public
-def geodesic_distance(R_a, R_b):
-    """Angle of the rotation taking ``R_a`` to ``R_b``: ``atan2(|vee(M)|, (tr M - 1) / 2)``.
+def geodesic_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
+    """Angle of the rotation taking `R_a` to `R_b`: `atan2(|vee(M)|, (tr M - 1) / 2)`.
 
-    Here ``M = R_a^T R_b``; ``|vee(M)| = sin(theta)`` comes from the antisymmetric part and
-    ``(tr M - 1) / 2 = cos(theta)`` from the trace.
+    Here `M = R_a^T R_b`; `|vee(M)| = sin(theta)` comes from the antisymmetric part and
+    `(tr M - 1) / 2 = cos(theta)` from the trace.
 
     Args:
-        R_a: ``(..., 3, 3)`` rotation matrix.
-        R_b: ``(..., 3, 3)`` rotation matrix; broadcasts against ``R_a``.
+        R_a: `(..., 3, 3)` rotation matrix.
+        R_b: `(..., 3, 3)` rotation matrix; broadcasts against `R_a`.
 
     Returns:
-        ``(...,)`` angle in radians, in ``[0, pi]``. Equal to :func:`angle_between` of the
-        corresponding quaternions.
+        `(...,)` angle in radians, in `[0, pi]`. Equal to [`angle_between`][rotjax.angle_between] of
+            the corresponding quaternions.
 
     Note:
         The atan2 form keeps absolute accuracy of about 1 ulp at 0 and at pi, where
-        ``acos((tr M - 1) / 2)`` loses half the digits and has an infinite derivative at 0.
-        The distance is a cone at ``R_a = R_b``: no derivative exists there, and the gradient
+        `acos((tr M - 1) / 2)` loses half the digits and has an infinite derivative at 0.
+        The distance is a cone at `R_a = R_b`: no derivative exists there, and the gradient
         returned is 0, the minimum-norm subgradient (finite; at any nonzero angle it is the true
         derivative, of unit size along the geodesic). Likewise at exactly pi, where the sine
         term vanishes, the gradient is 0 (a ridge). For a smooth loss use the squared distance.
         Inputs are assumed orthogonal; for other matrices this is a smooth function of their
         entries, but not a distance. An infinite or NaN component gives NaN.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        R_a = rj.rotvec_to_matrix([0.0, 0.0, 0.2])
+        R_b = rj.rotvec_to_matrix([0.0, 0.0, 0.5])
+        print(rj.geodesic_distance(R_a, R_b).round(6))
+        # 0.3
+        ```
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
     M = matmul(_mT(R_a), R_b)
@@ -171,20 +183,30 @@ def geodesic_distance(R_a, R_b):
 
 
 @public
-def chordal_distance(R_a, R_b):
-    """Frobenius norm ``||R_a - R_b||_F``, equal to ``2 sqrt(2) sin(theta / 2)``.
+def chordal_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
+    """Frobenius norm `||R_a - R_b||_F`, equal to `2 sqrt(2) sin(theta / 2)`.
 
     Args:
-        R_a: ``(..., 3, 3)`` matrix.
-        R_b: ``(..., 3, 3)`` matrix; broadcasts against ``R_a``.
+        R_a: `(..., 3, 3)` matrix.
+        R_b: `(..., 3, 3)` matrix; broadcasts against `R_a`.
 
     Returns:
-        ``(...,)`` distance, in ``[0, 2 sqrt(2)]`` for rotation matrices.
+        `(...,)` distance, in `[0, 2 sqrt(2)]` for rotation matrices.
 
     Note:
-        Cheaper than :func:`geodesic_distance` and monotone in the angle, but flat near pi
-        (its derivative in ``theta`` goes to 0 there). At ``R_a = R_b`` it is a cone; the
+        Cheaper than [`geodesic_distance`][rotjax.geodesic_distance] and monotone in the angle, but
+        flat near pi (its derivative in `theta` goes to 0 there). At `R_a = R_b` it is a cone; the
         gradient returned there is 0, finite. Its square is smooth everywhere.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        R_b = rj.rotvec_to_matrix([0.0, 0.0, jnp.pi])  # half turn
+        print(rj.chordal_distance(jnp.eye(3), R_b).round(6), (2 * jnp.sqrt(2.0)).round(6))
+        # 2.828427 2.828427
+        ```
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
     D = R_a - R_b
@@ -195,26 +217,37 @@ def chordal_distance(R_a, R_b):
 
 
 @public
-def sixd_to_matrix(x):
+def sixd_to_matrix(x: ArrayLike) -> Array:
     """Continuous 6D representation to a rotation matrix (Zhou et al. 2019), by Gram-Schmidt.
 
     Args:
-        x: ``(..., 6)``: ``x[..., :3]`` is read as the first column of the matrix and
-            ``x[..., 3:]`` as (a vector in the plane of) the second column. Neither need be unit
+        x: `(..., 6)`: `x[..., :3]` is read as the first column of the matrix and
+            `x[..., 3:]` as (a vector in the plane of) the second column. Neither need be unit
             or orthogonal.
 
     Returns:
-        ``(..., 3, 3)`` rotation matrix with columns ``b1 = a1 / |a1|``,
-        ``b2 = normalise(a2 - (b1 . a2) b1)`` and ``b3 = b1 x b2``.
+        `(..., 3, 3)` rotation matrix with columns `b1 = a1 / |a1|`,
+            `b2 = normalise(a2 - (b1 . a2) b1)` and `b3 = b1 x b2`.
 
     Note:
-        Defined and smooth wherever ``a1 != 0`` and ``a2`` is not parallel to ``a1``; there it
+        Defined and smooth wherever `a1 != 0` and `a2` is not parallel to `a1`; there it
         is undefined and returns NaN on purpose (no rotation is closer than any other), as
         for an infinite or NaN component. The two halves are prescaled by exact powers of
         two, so any finite non-zero scale of either gives the same matrix (float32 from 1e-30
         to 1e30, float64 from 1e-300 to 1e300), with finite gradients.
         The map is surjective and continuous, unlike quaternions or Euler angles read as
         network outputs, which is why it regresses better.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        R = rj.sixd_to_matrix([2.0, 0.0, 0.0, 1.0, 1.0, 0.0])  # neither unit nor orthogonal
+        print(R.round(6))
+        # [[1. 0. 0.]
+        #  [0. 1. 0.]
+        #  [0. 0. 1.]]
+        ```
     """
     (x,), dt = as_float(x)
     check_shape(x, (6,), "x")
@@ -226,32 +259,41 @@ def sixd_to_matrix(x):
 
 
 def _pow2_prescale(v):
-    """``v`` (``(..., 3)``) times the power of two that brings its largest component into
-    ``[1/2, 1)``: exact (no rounding, unless a much smaller component becomes subnormal, which
+    """`v` (`(..., 3)`) times the power of two that brings its largest component into
+    `[1/2, 1)`: exact (no rounding, unless a much smaller component becomes subnormal, which
     is below eps relative to the largest), so its square norm neither overflows nor underflows.
 
-    Applied to vectors that are only used through their direction (``b = v / |v|`` is
-    homogeneous of degree 0 in ``v``), the scale's own derivative contributes nothing
-    (``b'(v) v = 0``): it is held constant. Zero, infinite and NaN vectors are left as they
+    Applied to vectors that are only used through their direction (`b = v / |v|` is
+    homogeneous of degree 0 in `v`), the scale's own derivative contributes nothing
+    (`b'(v) v = 0`): it is held constant. Zero, infinite and NaN vectors are left as they
     are (and give NaN downstream, as they must)."""
     big = jax.lax.stop_gradient(jnp.max(jnp.abs(v), axis=-1, keepdims=True))
     finite = jnp.isfinite(big) & (big > 0)
     _, e = jnp.frexp(jnp.where(finite, big, 1.0))
-    # 2^-e in two factors: one alone would overflow for a subnormal ``big`` in float32.
+    # 2^-e in two factors: one alone would overflow for a subnormal `big` in float32.
     half = -e // 2
     one = jnp.ones((), v.dtype)
     return v * jnp.ldexp(one, half) * jnp.ldexp(one, -e - half)
 
 
 @public
-def matrix_to_sixd(R):
+def matrix_to_sixd(R: ArrayLike) -> Array:
     """Rotation matrix to the 6D representation: its first two columns, concatenated.
 
     Args:
-        R: ``(..., 3, 3)`` rotation matrix.
+        R: `(..., 3, 3)` rotation matrix.
 
     Returns:
-        ``(..., 6)``: ``(R[..., :, 0], R[..., :, 1])``. ``sixd_to_matrix`` inverts it on SO(3).
+        `(..., 6)`: `(R[..., :, 0], R[..., :, 1])`. `sixd_to_matrix` inverts it on SO(3).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        R = rj.rotvec_to_matrix([0.0, 0.0, 90.0], degrees=True)
+        print(rj.matrix_to_sixd(R).round(6))
+        # [-0.  1.  0. -1. -0.  0.]
+        ```
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
@@ -259,28 +301,39 @@ def matrix_to_sixd(R):
 
 
 @public
-def nined_to_matrix(x):
+def nined_to_matrix(x: ArrayLike) -> Array:
     """Nearest rotation matrix to an arbitrary 3x3 (Levinson et al. 2020), without an SVD.
 
     Args:
-        x: ``(..., 9)`` entries of a 3x3 matrix ``M`` in row-major order (a network output);
-            pass ``M.reshape(*M.shape[:-2], 9)`` to project a matrix. Any finite scale
+        x: `(..., 9)` entries of a 3x3 matrix `M` in row-major order (a network output);
+            pass `M.reshape(*M.shape[:-2], 9)` to project a matrix. Any finite scale
             (float32 1e-30..1e30, float64 1e-300..1e300; the result does not depend on it).
 
     Returns:
-        ``(..., 3, 3)`` the special-orthogonal polar factor of ``M``: the rotation ``R``
-        minimising ``||R - M||_F``, i.e. ``U diag(1, 1, det(U V^T)) V^T`` for the SVD
-        ``M = U diag(s) V^T`` (``det M < 0`` included). For ``M`` already a rotation, ``R = M``.
-        Computed as the rotation of the top eigenvector of Bar-Itzhack's symmetric 4x4 ``K(M)``
-        (Bar-Itzhack 2000), whose eigenvalue gap is ``2 (s'_2 + s'_3)`` (``s'`` the singular
-        values with ``det(U V^T)`` moved into ``s'_3``).
+        `(..., 3, 3)` the special-orthogonal polar factor of `M`: the rotation `R`
+            minimising `||R - M||_F`, i.e. `U diag(1, 1, det(U V^T)) V^T` for the SVD
+            `M = U diag(s) V^T` (`det M < 0` included). For `M` already a rotation, `R = M`.
+            Computed as the rotation of the top eigenvector of Bar-Itzhack's symmetric 4x4 `K(M)`
+            (Bar-Itzhack 2000), whose eigenvalue gap is `2 (s'_2 + s'_3)` (`s'` the singular
+            values with `det(U V^T)` moved into `s'_3`).
 
     Note:
-        Gradients and Hessians are exact wherever the projection is unique (``s'_2 + s'_3 > 0``),
+        Gradients and Hessians are exact wherever the projection is unique (`s'_2 + s'_3 > 0`),
         including every exact rotation and isotropic noise, where singular values tie. The
-        projection is not unique for ``rank(M) <= 1`` or for ``det M < 0`` with ``s_2 = s_3``:
+        projection is not unique for `rank(M) <= 1` or for `det M < 0` with `s_2 = s_3`:
         the gradient there is finite, with zero component along the undetermined rotation.
         The zero matrix and non-finite entries give NaN.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        M = jnp.array([[1.0, 0.1, 0.0], [-0.1, 1.0, 0.0], [0.0, 0.0, 2.0]])  # not a rotation
+        R = rj.nined_to_matrix(M.reshape(9))
+        print(jnp.allclose(R @ R.T, jnp.eye(3), atol=1e-6), jnp.linalg.det(R).round(6))
+        # True 1.0
+        ```
     """
     (x,), dt = as_float(x)
     check_shape(x, (9,), "x")
@@ -291,43 +344,63 @@ def nined_to_matrix(x):
 
 
 @public
-def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = False):
-    """Rotation that best maps the vectors ``b`` onto ``a`` (Wahba's problem).
+def align_vectors(
+    a: ArrayLike,
+    b: ArrayLike,
+    weights: ArrayLike | None = None,
+    method: str = "svd",
+    scalar_first: bool = False,
+) -> Array:
+    """Rotation that best maps the vectors `b` onto `a` (Wahba's problem).
 
-    Finds the ``R`` minimising ``sum_i w_i |a_i - R b_i|^2``, as ``scipy``'s
-    ``Rotation.align_vectors(a, b, weights)``: ``b`` are in the body frame, ``a`` in the
-    reference frame, and ``a_i ~ R @ b_i``. Equivalently ``R`` maximises ``tr(R^T B)`` with the
-    attitude profile matrix ``B = sum_i w_i a_i b_i^T``.
+    Finds the `R` minimising `sum_i w_i |a_i - R b_i|^2`, as `scipy`'s
+    `Rotation.align_vectors(a, b, weights)`: `b` are in the body frame, `a` in the
+    reference frame, and `a_i ~ R @ b_i`. Equivalently `R` maximises `tr(R^T B)` with the
+    attitude profile matrix `B = sum_i w_i a_i b_i^T`.
 
     Args:
-        a: ``(..., N, 3)`` vectors in the reference frame.
-        b: ``(..., N, 3)`` the same vectors in the body frame; broadcasts against ``a``.
-        weights: ``(..., N)`` non-negative weights; ``None`` for all ones.
-        method: ``"svd"`` or ``"q-method"``, kept for compatibility: both are computed the
-            same way, as the top eigenvector of Davenport's symmetric 4x4 ``K(B)`` (Davenport's
-            q-method), which maximises ``tr(R^T B)`` exactly as the SVD solution
-            ``U diag(1, 1, det(U V^T)) V^T`` of ``B`` does (Markley 1988), without an SVD.
-        scalar_first: return ``(w, x, y, z)``.
+        a: `(..., N, 3)` vectors in the reference frame.
+        b: `(..., N, 3)` the same vectors in the body frame; broadcasts against `a`.
+        weights: `(..., N)` non-negative weights; `None` for all ones.
+        method: `"svd"` or `"q-method"`, kept for compatibility: both are computed the
+            same way, as the top eigenvector of Davenport's symmetric 4x4 `K(B)` (Davenport's
+            q-method), which maximises `tr(R^T B)` exactly as the SVD solution
+            `U diag(1, 1, det(U V^T)) V^T` of `B` does (Markley 1988), without an SVD.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion of ``R``, with ``w >= 0`` (``|w| <= 4 eps`` at 180 degrees,
-        as in ``matrix_to_quaternion``). NaN where all weights (or all vectors) are zero, or an
-        entry is not finite. The result does not depend on the scale of ``a``, ``b`` or the
-        weights (e.g. magnetometer data in tesla or microtesla).
+        `(..., 4)` unit quaternion of `R`, with `w >= 0` (`|w| <= 4 eps` at 180 degrees,
+            as in [`matrix_to_quaternion`][rotjax.matrix_to_quaternion]). NaN where all weights
+            (or all vectors) are zero, or an entry is not finite. The result does not depend on
+            the scale of `a`, `b` or the weights (e.g. magnetometer data in tesla or
+            microtesla).
 
     Raises:
-        ValueError: for shapes other than ``(..., N, 3)`` or an unknown ``method``.
+        ValueError: for shapes other than `(..., N, 3)` or an unknown `method`.
 
     Note:
         Where the solution is unique (two or more non-parallel vectors with positive weight)
         gradients and Hessians are exact, including noise-free data, where singular values of
-        ``B`` tie: the eigenvalue gap of ``K`` is ``2 (s_2 + s_3) > 0``.
+        `B` tie: the eigenvalue gap of `K` is `2 (s_2 + s_3) > 0`.
 
-        With a single vector pair (or all vectors parallel) any rotation about ``a`` composed
+        With a single vector pair (or all vectors parallel) any rotation about `a` composed
         with the optimum is optimal too, and one of them is returned. The gradient is then
-        finite: its component along the undetermined rotation about ``a`` is zero, and the rest,
-        which moves ``R b`` to follow ``a``, is exact. Functions of ``R b`` therefore have exact
+        finite: its component along the undetermined rotation about `a` is zero, and the rest,
+        which moves `R b` to follow `a`, is exact. Functions of `R b` therefore have exact
         gradients there.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        q_true = rj.rotvec_to_quaternion([0.1, -0.2, 0.3])
+        b = jnp.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])  # body frame
+        a = rj.quaternion_apply(q_true, b)  # the same vectors in the reference frame
+        q = rj.align_vectors(a, b)
+        print(rj.angle_between(q, q_true) < 1e-6)
+        # True
+        ```
     """
     if method not in ALIGN_METHODS:
         raise ValueError(f"method must be one of {ALIGN_METHODS}, got {method!r}")
@@ -358,33 +431,45 @@ def align_vectors(a, b, weights=None, method: str = "svd", scalar_first: bool = 
 
 
 @public
-def quaternion_mean(q, weights=None, scalar_first: bool = False):
+def quaternion_mean(
+    q: ArrayLike, weights: ArrayLike | None = None, scalar_first: bool = False
+) -> Array:
     """Weighted average rotation (Markley et al. 2007).
 
-    The unit quaternion maximising ``sum_i w_i (q . q_i)^2``: the top eigenvector of
-    ``sum_i w_i q_i q_i^T``. It minimises the weighted sum of squared chordal distances
-    ``||R(q) - R(q_i)||_F^2``.
+    The unit quaternion maximising `sum_i w_i (q . q_i)^2`: the top eigenvector of
+    `sum_i w_i q_i q_i^T`. It minimises the weighted sum of squared chordal distances
+    `||R(q) - R(q_i)||_F^2`.
 
     Args:
-        q: ``(..., N, 4)`` quaternions; need not be unit (each is normalised first, at any
+        q: `(..., N, 4)` quaternions; need not be unit (each is normalised first, at any
             finite scale) and the sign of each is irrelevant.
-        weights: ``(..., N)`` non-negative weights; ``None`` for all ones.
-        scalar_first: quaternions (input and output) are ``(w, x, y, z)``.
+        weights: `(..., N)` non-negative weights; `None` for all ones.
+        scalar_first: quaternions (input and output) are `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion with ``w >= 0`` (``|w| <= 4 eps`` at 180 degrees, as in
-        ``matrix_to_quaternion``).
+        `(..., 4)` unit quaternion with `w >= 0` (`|w| <= 4 eps` at 180 degrees, as in
+            `matrix_to_quaternion`).
 
     Raises:
-        ValueError: for an empty set (``N = 0``) or mismatched shapes.
+        ValueError: for an empty set (`N = 0`) or mismatched shapes.
 
     Note:
-        For rotations about one axis by angles ``t_i`` the mean is the rotation by the circular
-        mean ``atan2(sum w_i sin t_i, sum w_i cos t_i)``. All-zero weights give NaN. Gradients
+        For rotations about one axis by angles `t_i` the mean is the rotation by the circular
+        mean `atan2(sum w_i sin t_i, sum w_i cos t_i)`. All-zero weights give NaN. Gradients
         and Hessians are exact where the top eigenvalue is simple, identical inputs included.
         The mean is undefined when the top eigenvalue is repeated (e.g. two rotations 180
         degrees apart with equal weights); the gradient is then finite, with zero component
         within the tied eigenspace.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = rj.rotvec_to_quaternion([[0.0, 0.0, 0.1], [0.0, 0.0, 0.3]])
+        mean = rj.quaternion_mean(q)
+        print(rj.quaternion_to_rotvec(mean).round(6))
+        # [-0.  -0.   0.2]
+        ```
     """
     if weights is None:
         (q,), dt = as_float(q)
@@ -407,28 +492,38 @@ def quaternion_mean(q, weights=None, scalar_first: bool = False):
 
 
 @public
-def slerp(p, q, t, scalar_first: bool = False):
-    """Spherical linear interpolation along the shorter arc: ``p * (p^-1 q)^t``.
+def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike, scalar_first: bool = False) -> Array:
+    """Spherical linear interpolation along the shorter arc: `p * (p^-1 q)^t`.
 
     Args:
-        p: ``(..., 4)`` start quaternion; need not be unit.
-        q: ``(..., 4)`` end quaternion; need not be unit; broadcasts against ``p``.
-        t: ``(...)`` interpolation parameter (0 gives ``p``, 1 gives ``q``; values outside
-            ``[0, 1]`` extrapolate); broadcasts against ``p[..., 0]``.
-        scalar_first: quaternions are ``(w, x, y, z)``.
+        p: `(..., 4)` start quaternion; need not be unit.
+        q: `(..., 4)` end quaternion; need not be unit; broadcasts against `p`.
+        t: `(...)` interpolation parameter (0 gives `p`, 1 gives `q`; values outside
+            `[0, 1]` extrapolate); broadcasts against `p[..., 0]`.
+        scalar_first: quaternions are `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion. The angle from ``p`` grows as ``t`` times the angle
-        between ``p`` and ``q``: constant angular speed. At ``t = 0`` it is ``p / |p|``; at
-        ``t = 1`` it is ``q / |q|`` or its negative (the same rotation).
+        `(..., 4)` unit quaternion. The angle from `p` grows as `t` times the angle
+            between `p` and `q`: constant angular speed. At `t = 0` it is `p / |p|`; at
+            `t = 1` it is `q / |q|` or its negative (the same rotation).
 
     Note:
-        Written as the exponential of ``t`` times the logarithm of the relative rotation, both
-        with Taylor branches, so there is no ``sin(theta) / sin(theta)`` 0/0 as ``p -> q``:
-        values and gradients are exact there. ``q`` and ``-q`` are the same rotation and give
-        the same path, so ``p = -q`` is a constant path. When the relative rotation is exactly
+        Written as the exponential of `t` times the logarithm of the relative rotation, both
+        with Taylor branches, so there is no `sin(theta) / sin(theta)` 0/0 as `p -> q`:
+        values and gradients are exact there. `q` and `-q` are the same rotation and give
+        the same path, so `p = -q` is a constant path. When the relative rotation is exactly
         180 degrees, both arcs are equally short and the one chosen follows the sign of the
         relative quaternion's vector part (the logarithm has a cut there).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        p = rj.rotvec_to_quaternion([0.0, 0.0, 0.0])
+        q = rj.rotvec_to_quaternion([0.0, 0.0, 1.0])
+        print(rj.quaternion_to_rotvec(rj.slerp(p, q, 0.25)).round(6))
+        # [0.   0.   0.25]
+        ```
     """
     (p, q, t), dt = as_float(p, q, t)
     check_shape(p, (4,), "p")

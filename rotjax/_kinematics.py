@@ -2,13 +2,13 @@
 
 Conventions (see the README's Conventions table):
 
-* ``R`` is active, ``v_world = R @ v_body``; quaternions are scalar last and Hamilton.
-* ``frame="body"``: the angular velocity in body axes, ``omega_body = vee(R.T @ dR/dt)``.
-* ``frame="world"``: the angular velocity in world axes, ``omega_world = vee(dR/dt @ R.T)``
-  (the Simscape seed's ``Omega = dR/dt R^T``). ``omega_world = R @ omega_body``.
+* `R` is active, `v_world = R @ v_body`; quaternions are scalar last and Hamilton.
+* `frame="body"`: the angular velocity in body axes, `omega_body = vee(R.T @ dR/dt)`.
+* `frame="world"`: the angular velocity in world axes, `omega_world = vee(dR/dt @ R.T)`
+  (the Simscape seed's `Omega = dR/dt R^T`). `omega_world = R @ omega_body`.
 
 Euler-angle rates are reduced to one closed form: the *intrinsic* sequence in the *body* frame.
-With ``R = R_i(a0) R_j(a1) R_k(a2)``, each angle rate spins the body about its own rotation axis
+With `R = R_i(a0) R_j(a1) R_k(a2)`, each angle rate spins the body about its own rotation axis
 carried into body axes, so
 
     omega_body = a0' R_k(a2)^T R_j(a1)^T e_i + a1' R_k(a2)^T e_j + a2' e_k
@@ -16,10 +16,10 @@ carried into body axes, so
 
 The other three cases map onto it exactly (derived here, checked against autodiff in the tests):
 
-* extrinsic ``(i, j, k)`` with angles ``a`` is intrinsic ``(k, j, i)`` with the angles reversed;
-* the world-frame velocity of ``R`` is minus the body-frame velocity of ``R^T``, and ``R^T`` is
+* extrinsic `(i, j, k)` with angles `a` is intrinsic `(k, j, i)` with the angles reversed;
+* the world-frame velocity of `R` is minus the body-frame velocity of `R^T`, and `R^T` is
   the intrinsic reversed sequence at the negated, reversed angles; the two sign flips cancel, so
-  ``E_world(seq, a) = E_body(reversed seq, -reversed a) @ P`` with ``P`` the order reversal.
+  `E_world(seq, a) = E_body(reversed seq, -reversed a) @ P` with `P` the order reversal.
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ import operator
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._euler import is_proper, parse_seq
 from ._numerics import (
@@ -60,7 +62,7 @@ def _check_frame(frame) -> None:
 
 
 def _levi_civita(i: int, j: int, k: int) -> int:
-    """``epsilon_ijk`` for distinct axis indices: +1 for a cyclic order of (x, y, z), else -1."""
+    """`epsilon_ijk` for distinct axis indices: +1 for a cyclic order of (x, y, z), else -1."""
     return (i - j) * (j - k) * (k - i) // 2
 
 
@@ -68,12 +70,12 @@ def _levi_civita(i: int, j: int, k: int) -> int:
 
 
 def _reduce(seq: str, frame: str):
-    """Map ``(seq, frame)`` to the intrinsic body-frame case.
+    """Map `(seq, frame)` to the intrinsic body-frame case.
 
     Returns:
-        ``(axes, negate, reverse)``: the intrinsic axes to use, whether the angles are negated,
-        and whether the angle order is reversed (the angles on input, the columns of ``E`` and
-        the rows of ``E^-1`` on output).
+        `(axes, negate, reverse)`: the intrinsic axes to use, whether the angles are negated,
+            and whether the angle order is reversed (the angles on input, the columns of `E` and
+            the rows of `E^-1` on output).
     """
     axes, intrinsic = parse_seq(seq)
     _check_frame(frame)
@@ -89,7 +91,7 @@ def _prep_angles(a, negate: bool, reverse: bool):
 
 
 def _rotate_k_transposed(k: int, angle, v):
-    """``R_k(angle)^T @ v`` on a list of three component arrays (``R_k``: about axis ``k``)."""
+    """`R_k(angle)^T @ v` on a list of three component arrays (`R_k`: about axis `k`)."""
     p, r = (k + 1) % 3, (k + 2) % 3  # (k, p, r) is cyclic, R_k turns e_p towards e_r
     c, s = jnp.cos(angle), jnp.sin(angle)
     out = list(v)
@@ -99,12 +101,12 @@ def _rotate_k_transposed(k: int, angle, v):
 
 
 def _middle_terms(axes, a1):
-    """``(h, g, m, s)`` for the middle angle ``a1`` of intrinsic ``axes = (i, j, k)``.
+    """`(h, g, m, s)` for the middle angle `a1` of intrinsic `axes = (i, j, k)`.
 
-    ``u = R_j(a1)^T e_i = cos(a1) e_i + s sin(a1) e_m`` with ``m`` the axis that is neither ``i``
-    nor ``j`` and ``s = epsilon_ijm``. ``h`` is the distance to gimbal lock (``cos a1`` for
-    Tait-Bryan, ``sin a1`` for proper sequences) and ``g = u . e_k`` the one off-diagonal entry of
-    the Gram matrix ``M^T M = [[1, 0, g], [0, 1, 0], [g, 0, 1]]``; ``h^2 + g^2 = 1``.
+    `u = R_j(a1)^T e_i = cos(a1) e_i + s sin(a1) e_m` with `m` the axis that is neither `i`
+    nor `j` and `s = epsilon_ijm`. `h` is the distance to gimbal lock (`cos a1` for
+    Tait-Bryan, `sin a1` for proper sequences) and `g = u . e_k` the one off-diagonal entry of
+    the Gram matrix `M^T M = [[1, 0, g], [0, 1, 0], [g, 0, 1]]`; `h^2 + g^2 = 1`.
     """
     i, j, k = axes
     m = 3 - i - j
@@ -116,7 +118,7 @@ def _middle_terms(axes, a1):
 
 
 def _body_rate_matrix(axes, a):
-    """``E`` with ``omega_body = E @ rates`` for the intrinsic sequence ``axes`` (closed form)."""
+    """`E` with `omega_body = E @ rates` for the intrinsic sequence `axes` (closed form)."""
     i, j, k = axes
     m = 3 - i - j
     s = _levi_civita(i, j, m)
@@ -143,13 +145,13 @@ def _rate_matrix(a, seq, frame):
 
 
 def _inverse_rates(a, omega, seq, frame, damping):
-    """Exact (``damping == 0``) or damped least-squares inverse of :func:`_rate_matrix`.
+    """Exact (`damping == 0`) or damped least-squares inverse of `_rate_matrix`.
 
-    With ``E = R_k(a2)^T M P`` (``P`` a permutation) and ``v = R_k(a2) omega``, the damped solution
-    ``(E^T E + d^2 I)^-1 E^T omega = P^T (G + d^2 I)^-1 M^T v`` only needs the 2x2 block
-    ``[[1 + d^2, g], [g, 1 + d^2]]`` of ``G = M^T M``. Its determinant is written
-    ``h^2 + d^2 (2 + d^2)`` (``1 - g^2 = h^2``), so no cancellation happens near lock, and it is
-    at least ``2 d^2`` everywhere.
+    With `E = R_k(a2)^T M P` (`P` a permutation) and `v = R_k(a2) omega`, the damped solution
+    `(E^T E + d^2 I)^-1 E^T omega = P^T (G + d^2 I)^-1 M^T v` only needs the 2x2 block
+    `[[1 + d^2, g], [g, 1 + d^2]]` of `G = M^T M`. Its determinant is written
+    `h^2 + d^2 (2 + d^2)` (`1 - g^2 = h^2`), so no cancellation happens near lock, and it is
+    at least `2 d^2` everywhere.
     """
     axes, negate, reverse = _reduce(seq, frame)
     a = _prep_angles(a, negate, reverse)
@@ -177,25 +179,36 @@ def _inverse_rates(a, omega, seq, frame, damping):
 
 
 @public
-def euler_rate_matrix(angles, seq: str, frame: str = "body"):
-    """Matrix ``E`` that maps Euler-angle rates to angular velocity: ``omega = E @ rates``.
+def euler_rate_matrix(angles: ArrayLike, seq: str, frame: str = "body") -> Array:
+    """Matrix `E` that maps Euler-angle rates to angular velocity: `omega = E @ rates`.
 
     Args:
-        angles: ``(..., 3)`` Euler angles in radians, in the order of ``seq``; any values.
-        seq: axis sequence: ``"XYZ"``-style intrinsic, ``"xyz"``-style extrinsic or digits
-            ``"123"`` (intrinsic); see :func:`rotjax.euler_to_quaternion`.
-        frame: ``"body"`` (``omega = vee(R.T @ dR/dt)``, components in body axes) or
-            ``"world"`` (``omega = vee(dR/dt @ R.T)``, components in world axes).
+        angles: `(..., 3)` Euler angles in radians, in the order of `seq`; any values.
+        seq: axis sequence: `"XYZ"`-style intrinsic, `"xyz"`-style extrinsic or digits
+            `"123"` (intrinsic); see [`euler_to_quaternion`][rotjax.euler_to_quaternion].
+        frame: `"body"` (`omega = vee(R.T @ dR/dt)`, components in body axes) or
+            `"world"` (`omega = vee(dR/dt @ R.T)`, components in world axes).
 
     Returns:
-        ``(..., 3, 3)`` matrix whose column ``n`` is the rotation axis of angle ``n`` expressed
-        in ``frame``. For intrinsic ``"ZXZ"`` in the body frame this is Nikravesh's Eq. (A.3),
-        for intrinsic ``"XYZ"`` the corrected Eq. (A.7).
+        `(..., 3, 3)` matrix whose column `n` is the rotation axis of angle `n` expressed
+            in `frame`. For intrinsic `"ZXZ"` in the body frame this is Nikravesh's Eq. (A.3),
+            for intrinsic `"XYZ"` the corrected Eq. (A.7).
 
     Note:
-        ``E`` is smooth everywhere. Its determinant is ``+-cos(a1)`` for Tait-Bryan sequences and
-        ``+-sin(a1)`` for proper Euler sequences (``a1`` the middle angle): it is singular at
+        `E` is smooth everywhere. Its determinant is `+-cos(a1)` for Tait-Bryan sequences and
+        `+-sin(a1)` for proper Euler sequences (`a1` the middle angle): it is singular at
         gimbal lock, where the first and third axes coincide.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        E = rj.euler_rate_matrix([0.0, 0.0, 0.0], "ZYX")  # yaw, pitch, roll at zero
+        print(E)
+        # [[-0.  0.  1.]
+        #  [ 0.  1.  0.]
+        #  [ 1.  0.  0.]]
+        ```
     """
     (a,), dt = as_float(angles)
     check_shape(a, (3,), "angles")
@@ -203,19 +216,30 @@ def euler_rate_matrix(angles, seq: str, frame: str = "body"):
 
 
 @public
-def euler_rates_to_angular_velocity(angles, rates, seq: str, frame: str = "body"):
-    """Angular velocity of a body whose Euler angles change at ``rates``.
+def euler_rates_to_angular_velocity(
+    angles: ArrayLike, rates: ArrayLike, seq: str, frame: str = "body"
+) -> Array:
+    """Angular velocity of a body whose Euler angles change at `rates`.
 
     Args:
-        angles: ``(..., 3)`` Euler angles in radians, in the order of ``seq``.
-        rates: ``(..., 3)`` angle rates (rad per unit time); broadcasts against ``angles``.
-        seq: axis sequence; see :func:`euler_rate_matrix`.
-        frame: ``"body"`` (``omega = vee(R.T @ dR/dt)``, components in body axes) or
-            ``"world"`` (``omega = vee(dR/dt @ R.T)``, components in world axes).
+        angles: `(..., 3)` Euler angles in radians, in the order of `seq`.
+        rates: `(..., 3)` angle rates (rad per unit time); broadcasts against `angles`.
+        seq: axis sequence; see [`euler_rate_matrix`][rotjax.euler_rate_matrix].
+        frame: `"body"` (`omega = vee(R.T @ dR/dt)`, components in body axes) or
+            `"world"` (`omega = vee(dR/dt @ R.T)`, components in world axes).
 
     Returns:
-        ``(..., 3)`` angular velocity ``euler_rate_matrix(angles, seq, frame) @ rates``. Smooth
-        and finite everywhere, gimbal lock included.
+        `(..., 3)` angular velocity `euler_rate_matrix(angles, seq, frame) @ rates`. Smooth
+            and finite everywhere, gimbal lock included.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        omega = rj.euler_rates_to_angular_velocity([0.3, 0.2, 0.1], [0.0, 0.0, 1.0], "ZYX")
+        print(omega.round(6))  # the roll rate turns the body about its own x axis
+        # [1. 0. 0.]
+        ```
     """
     (a, r), dt = as_float(angles, rates)
     check_shape(a, (3,), "angles")
@@ -225,33 +249,45 @@ def euler_rates_to_angular_velocity(angles, rates, seq: str, frame: str = "body"
 
 
 @public
-def angular_velocity_to_euler_rates(angles, omega, seq: str, frame: str = "body", damping=0.0):
-    """Euler-angle rates that produce the angular velocity ``omega``.
+def angular_velocity_to_euler_rates(
+    angles: ArrayLike, omega: ArrayLike, seq: str, frame: str = "body", damping: ArrayLike = 0.0
+) -> Array:
+    """Euler-angle rates that produce the angular velocity `omega`.
 
     Args:
-        angles: ``(..., 3)`` Euler angles in radians, in the order of ``seq``.
-        omega: ``(..., 3)`` angular velocity in ``frame``; broadcasts against ``angles``.
-        seq: axis sequence; see :func:`euler_rate_matrix`.
-        frame: ``"body"`` (``omega = vee(R.T @ dR/dt)``, components in body axes) or
-            ``"world"`` (``omega = vee(dR/dt @ R.T)``, components in world axes).
-        damping: ``(...)`` non-negative damping ``d``, traced (it may vary inside a compiled
-            loop). ``0`` gives the exact inverse ``E^-1 @ omega`` in closed form (a ``1/cos`` of
-            the middle angle for Tait-Bryan sequences, ``1/sin`` for proper ones, as Nikravesh
-            Eqs. A.4 and A.8). ``d > 0`` gives the damped least-squares solution
-            ``(E^T E + d^2 I)^-1 E^T omega``, which differs from the exact one by ``O(d^2)``
+        angles: `(..., 3)` Euler angles in radians, in the order of `seq`.
+        omega: `(..., 3)` angular velocity in `frame`; broadcasts against `angles`.
+        seq: axis sequence; see [`euler_rate_matrix`][rotjax.euler_rate_matrix].
+        frame: `"body"` (`omega = vee(R.T @ dR/dt)`, components in body axes) or
+            `"world"` (`omega = vee(dR/dt @ R.T)`, components in world axes).
+        damping: `(...)` non-negative damping `d`, traced (it may vary inside a compiled
+            loop). `0` gives the exact inverse `E^-1 @ omega` in closed form (a `1/cos` of
+            the middle angle for Tait-Bryan sequences, `1/sin` for proper ones, as Nikravesh
+            Eqs. A.4 and A.8). `d > 0` gives the damped least-squares solution
+            `(E^T E + d^2 I)^-1 E^T omega`, which differs from the exact one by `O(d^2)`
             away from lock.
 
     Returns:
-        ``(..., 3)`` angle rates.
+        `(..., 3)` angle rates.
 
     Note:
-        *At gimbal lock with* ``damping=0`` the rates do not exist (only the sum or difference
-        of the outer rates is defined, and an ``omega`` with a component along the missing
-        direction cannot be produced at all): the result is non-finite (``inf`` or ``nan``),
-        and near lock it grows like ``1/euler_singularity``. With ``damping > 0`` the result is
+        *At gimbal lock with* `damping=0` the rates do not exist (only the sum or difference
+        of the outer rates is defined, and an `omega` with a component along the missing
+        direction cannot be produced at all): the result is non-finite (`inf` or `nan`),
+        and near lock it grows like `1/euler_singularity`. With `damping > 0` the result is
         finite everywhere with finite gradients; at lock it is the minimum-norm least-squares
         solution shrunk by the damping. A common pattern is to switch on damping inside a jitted
-        loop with ``jnp.where(euler_singularity(angles, seq) < tol, d, 0.0)``.
+        loop with `jnp.where(euler_singularity(angles, seq) < tol, d, 0.0)`.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        angles = [0.3, 0.2, 0.1]
+        omega = rj.euler_rates_to_angular_velocity(angles, [0.5, -0.2, 1.0], "ZYX")
+        print(rj.angular_velocity_to_euler_rates(angles, omega, "ZYX").round(6))
+        # [ 0.5 -0.2  1. ]
+        ```
     """
     (a, w), dt = as_float(angles, omega)
     check_shape(a, (3,), "angles")
@@ -261,17 +297,28 @@ def angular_velocity_to_euler_rates(angles, omega, seq: str, frame: str = "body"
 
 
 @public
-def euler_singularity(angles, seq: str):
-    """Distance to gimbal lock: ``|cos(a1)|`` (Tait-Bryan) or ``|sin(a1)|`` (proper Euler).
+def euler_singularity(angles: ArrayLike, seq: str) -> Array:
+    """Distance to gimbal lock: `|cos(a1)|` (Tait-Bryan) or `|sin(a1)|` (proper Euler).
 
     Args:
-        angles: ``(..., 3)`` Euler angles in radians, in the order of ``seq``.
-        seq: axis sequence; see :func:`euler_rate_matrix`.
+        angles: `(..., 3)` Euler angles in radians, in the order of `seq`.
+        seq: axis sequence; see [`euler_rate_matrix`][rotjax.euler_rate_matrix].
 
     Returns:
-        ``(...)`` value in ``[0, 1]``: ``|det E|`` of :func:`euler_rate_matrix` in either frame;
-        0 exactly at gimbal lock, 1 when the first and third axes are perpendicular. Branch-free,
-        so it can drive a ``jnp.where`` inside ``jit`` or ``lax.scan``.
+        `(...)` value in `[0, 1]`: `|det E|` of [`euler_rate_matrix`][rotjax.euler_rate_matrix] in
+            either frame; 0 exactly at gimbal lock, 1 when the first and third axes are
+            perpendicular. Branch-free, so it can drive a `jnp.where` inside `jit` or `lax.scan`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        print(rj.euler_singularity([0.0, jnp.pi / 2, 0.0], "ZYX").round(6))  # pitch 90 deg: lock
+        # 0.0
+        print(rj.euler_singularity([0.0, 0.0, 0.0], "ZYX"))
+        # 1.0
+        ```
     """
     (a,), dt = as_float(angles)
     check_shape(a, (3,), "angles")
@@ -295,20 +342,31 @@ def _quat_rate(q, omega, frame):
 
 
 @public
-def quaternion_derivative(q, omega, frame: str = "body", scalar_first: bool = False):
-    """Time derivative of a quaternion rotating at angular velocity ``omega``.
+def quaternion_derivative(
+    q: ArrayLike, omega: ArrayLike, frame: str = "body", scalar_first: bool = False
+) -> Array:
+    """Time derivative of a quaternion rotating at angular velocity `omega`.
 
     Args:
-        q: ``(..., 4)`` quaternion, scalar last unless ``scalar_first``; need not be unit.
-        omega: ``(..., 3)`` angular velocity in ``frame``; broadcasts against ``q``.
-        frame: ``"body"`` (``q' = q * (omega, 0) / 2``) or ``"world"``
-            (``q' = (omega, 0) * q / 2``), Hamilton products.
-        scalar_first: ``q`` (and the result) are ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion, scalar last unless `scalar_first`; need not be unit.
+        omega: `(..., 3)` angular velocity in `frame`; broadcasts against `q`.
+        frame: `"body"` (`q' = q * (omega, 0) / 2`) or `"world"`
+            (`q' = (omega, 0) * q / 2`), Hamilton products.
+        scalar_first: `q` (and the result) are `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` ``dq/dt``, in the layout of ``q``. It is orthogonal to ``q``, so the norm of
-        ``q`` is preserved; for a non-unit ``q`` it is the derivative of ``|q| q_unit(t)``.
-        Bilinear in ``q`` and ``omega``: no singularity.
+        `(..., 4)` `dq/dt`, in the layout of `q`. It is orthogonal to `q`, so the norm of
+            `q` is preserved; for a non-unit `q` it is the derivative of `|q| q_unit(t)`.
+            Bilinear in `q` and `omega`: no singularity.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = [0.0, 0.0, 0.0, 1.0]
+        print(rj.quaternion_derivative(q, [0.0, 0.0, 2.0]))  # 2 rad/s about z
+        # [0. 0. 1. 0.]
+        ```
     """
     (q, w), dt = as_float(q, omega)
     check_shape(q, (4,), "q")
@@ -320,21 +378,31 @@ def quaternion_derivative(q, omega, frame: str = "body", scalar_first: bool = Fa
 
 @public
 def quaternion_derivative_to_angular_velocity(
-    q, q_dot, frame: str = "body", scalar_first: bool = False
-):
+    q: ArrayLike, q_dot: ArrayLike, frame: str = "body", scalar_first: bool = False
+) -> Array:
     """Angular velocity from a quaternion and its time derivative.
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit (must be non-zero).
-        q_dot: ``(..., 4)`` its time derivative, same layout; broadcasts against ``q``.
-        frame: ``"body"`` (``omega = 2 vec(conj(q) * q') / |q|^2``) or ``"world"``
-            (``omega = 2 vec(q' * conj(q)) / |q|^2``).
-        scalar_first: quaternions are ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion; need not be unit (must be non-zero).
+        q_dot: `(..., 4)` its time derivative, same layout; broadcasts against `q`.
+        frame: `"body"` (`omega = 2 vec(conj(q) * q') / |q|^2`) or `"world"`
+            (`omega = 2 vec(q' * conj(q)) / |q|^2`).
+        scalar_first: quaternions are `(w, x, y, z)`.
 
     Returns:
-        ``(..., 3)`` angular velocity in ``frame``. A component of ``q_dot`` along ``q`` (a
-        change of norm) lands in the scalar part and is ignored, so the result is exact for a
-        quaternion of varying norm. The zero quaternion gives NaN.
+        `(..., 3)` angular velocity in `frame`. A component of `q_dot` along `q` (a
+            change of norm) lands in the scalar part and is ignored, so the result is exact for a
+            quaternion of varying norm. The zero quaternion gives NaN.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = rj.rotvec_to_quaternion([0.1, 0.2, 0.3])
+        q_dot = rj.quaternion_derivative(q, [1.0, -2.0, 0.5])
+        print(rj.quaternion_derivative_to_angular_velocity(q, q_dot).round(6))
+        # [ 1.  -2.   0.5]
+        ```
     """
     (q, qd), dt = as_float(q, q_dot)
     check_shape(q, (4,), "q")
@@ -354,18 +422,30 @@ def quaternion_derivative_to_angular_velocity(
 
 
 @public
-def matrix_derivative_to_angular_velocity(R, R_dot, frame: str = "body"):
+def matrix_derivative_to_angular_velocity(
+    R: ArrayLike, R_dot: ArrayLike, frame: str = "body"
+) -> Array:
     """Angular velocity from a rotation matrix and its time derivative.
 
     Args:
-        R: ``(..., 3, 3)`` active rotation matrix.
-        R_dot: ``(..., 3, 3)`` its time derivative; broadcasts against ``R``.
-        frame: ``"body"`` (``omega = vee(R.T @ R_dot)``) or ``"world"``
-            (``omega = vee(R_dot @ R.T)``, the Simscape seed's ``Omega = dR/dt R^T``).
+        R: `(..., 3, 3)` active rotation matrix.
+        R_dot: `(..., 3, 3)` its time derivative; broadcasts against `R`.
+        frame: `"body"` (`omega = vee(R.T @ R_dot)`) or `"world"`
+            (`omega = vee(R_dot @ R.T)`, the Simscape seed's `Omega = dR/dt R^T`).
 
     Returns:
-        ``(..., 3)`` angular velocity in ``frame``. ``vee`` reads the antisymmetric part, so a
-        ``R_dot`` slightly off the tangent space is projected onto it. No singularity.
+        `(..., 3)` angular velocity in `frame`. `vee` reads the antisymmetric part, so a
+            `R_dot` slightly off the tangent space is projected onto it. No singularity.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        R = rj.rotvec_to_matrix([0.1, 0.2, 0.3])
+        R_dot = rj.angular_velocity_to_matrix_derivative(R, [1.0, -2.0, 0.5])
+        print(rj.matrix_derivative_to_angular_velocity(R, R_dot).round(6))
+        # [ 1.  -2.   0.5]
+        ```
     """
     (R, Rd), dt = as_float(R, R_dot)
     check_shape(R, (3, 3), "R")
@@ -376,17 +456,30 @@ def matrix_derivative_to_angular_velocity(R, R_dot, frame: str = "body"):
 
 
 @public
-def angular_velocity_to_matrix_derivative(R, omega, frame: str = "body"):
-    """Time derivative of a rotation matrix turning at angular velocity ``omega``.
+def angular_velocity_to_matrix_derivative(
+    R: ArrayLike, omega: ArrayLike, frame: str = "body"
+) -> Array:
+    """Time derivative of a rotation matrix turning at angular velocity `omega`.
 
     Args:
-        R: ``(..., 3, 3)`` active rotation matrix.
-        omega: ``(..., 3)`` angular velocity in ``frame``; broadcasts against ``R``.
-        frame: ``"body"`` (``R_dot = R @ hat(omega)``) or ``"world"``
-            (``R_dot = hat(omega) @ R``).
+        R: `(..., 3, 3)` active rotation matrix.
+        omega: `(..., 3)` angular velocity in `frame`; broadcasts against `R`.
+        frame: `"body"` (`R_dot = R @ hat(omega)`) or `"world"`
+            (`R_dot = hat(omega) @ R`).
 
     Returns:
-        ``(..., 3, 3)`` ``dR/dt``. Linear in ``omega``: no singularity.
+        `(..., 3, 3)` `dR/dt`. Linear in `omega`: no singularity.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        print(rj.angular_velocity_to_matrix_derivative(jnp.eye(3), [0.0, 0.0, 1.0]))
+        # [[ 0. -1.  0.]
+        #  [ 1.  0.  0.]
+        #  [ 0.  0.  0.]]
+        ```
     """
     (R, w), dt = as_float(R, omega)
     check_shape(R, (3, 3), "R")
@@ -400,7 +493,7 @@ def angular_velocity_to_matrix_derivative(R, omega, frame: str = "body"):
 
 
 def _propagation_args(q, omega, frame, method, methods, name):
-    """Validated ``(q, omega, out_dtype)`` for the integrators (a bad frame or method raises)."""
+    """Validated `(q, omega, out_dtype)` for the integrators (a bad frame or method raises)."""
     (q, w), out_dt = as_float(q, omega)
     check_shape(q, (4,), name)
     check_shape(w, (3,), "omega")
@@ -412,32 +505,37 @@ def _propagation_args(q, omega, frame, method, methods, name):
 
 @public
 def integrate_angular_velocity(
-    q, omega, dt, frame: str = "body", method: str = "exponential", scalar_first: bool = False
-):
+    q: ArrayLike,
+    omega: ArrayLike,
+    dt: ArrayLike,
+    frame: str = "body",
+    method: str = "exponential",
+    scalar_first: bool = False,
+) -> Array:
     """One step of attitude propagation with the angular velocity held constant over the step.
 
     Args:
-        q: ``(..., 4)`` orientation at the start of the step; need not be unit.
-        omega: ``(..., 3)`` angular velocity in ``frame`` over the step (zero-order hold, as a
-            gyro sample); broadcasts against ``q``.
-        dt: ``(...)`` step length; broadcasts against ``q[..., 0]``. Any sign.
-        frame: ``"body"`` (gyro axes, ``q_next = q * dq``) or ``"world"``
-            (``q_next = dq * q``).
+        q: `(..., 4)` orientation at the start of the step; need not be unit.
+        omega: `(..., 3)` angular velocity in `frame` over the step (zero-order hold, as a
+            gyro sample); broadcasts against `q`.
+        dt: `(...)` step length; broadcasts against `q[..., 0]`. Any sign.
+        frame: `"body"` (gyro axes, `q_next = q * dq`) or `"world"`
+            (`q_next = dq * q`).
         method:
 
-            * ``"exponential"`` (default): ``dq = exp(omega dt / 2)``, the exact step for a
-              constant ``omega``. Its Taylor branch at ``omega = 0`` makes the gradient there
+            * `"exponential"` (default): `dq = exp(omega dt / 2)`, the exact step for a
+              constant `omega`. Its Taylor branch at `omega = 0` makes the gradient there
               exact.
-            * ``"euler"``: ``q + dt q'``, renormalised. Because ``omega`` is constant over the
-              step, the renormalised step turns about the exact axis by ``2 atan(|omega| dt / 2)``
-              instead of ``|omega| dt``: local error ``O(dt^3)``, global ``O(dt^2)``.
-            * ``"rk4"``: classical Runge-Kutta on ``q' = q * (omega, 0) / 2``, renormalised:
-              local error ``O(dt^5)``, global ``O(dt^4)``.
-        scalar_first: quaternions are ``(w, x, y, z)``.
+            * `"euler"`: `q + dt q'`, renormalised. Because `omega` is constant over the
+              step, the renormalised step turns about the exact axis by `2 atan(|omega| dt / 2)`
+              instead of `|omega| dt`: local error `O(dt^3)`, global `O(dt^2)`.
+            * `"rk4"`: classical Runge-Kutta on `q' = q * (omega, 0) / 2`, renormalised:
+              local error `O(dt^5)`, global `O(dt^4)`.
+        scalar_first: quaternions are `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion at the end of the step, in the layout of ``q``. No
-        hemisphere is imposed, so a sequence of steps stays continuous.
+        `(..., 4)` unit quaternion at the end of the step, in the layout of `q`. No
+            hemisphere is imposed, so a sequence of steps stays continuous.
 
     Note:
         The step is a pure function of its arrays, so it scans over a gyro log::
@@ -446,9 +544,23 @@ def integrate_angular_velocity(
             q_end, q_traj = jax.lax.scan(step, q0, omegas)
 
         Holding each sample makes the result first order in the sample interval, whatever the
-        method: ``"rk4"`` integrates the held signal accurately, not the motion between the
-        samples. For a log of samples, :func:`integrate_angular_velocity_samples` reads
-        ``omega`` between them (second or fourth order).
+        method: `"rk4"` integrates the held signal accurately, not the motion between the
+        samples. For a log of samples,
+        [`integrate_angular_velocity_samples`][rotjax.integrate_angular_velocity_samples] reads
+        `omega` between them (second or fourth order).
+
+    Examples:
+        ```python
+        import jax
+        import rotjax as rj
+
+        def step(q, _):
+            return rj.integrate_angular_velocity(q, [0.0, 0.0, 1.0], 0.1), None
+
+        q, _ = jax.lax.scan(step, rj.rotvec_to_quaternion([0.0, 0.0, 0.0]), length=10)
+        print(rj.quaternion_to_rotvec(q).round(6))  # 1 rad/s for 1 s
+        # [0. 0. 1.]
+        ```
     """
     q, w, out_dt = _propagation_args(q, omega, frame, method, METHODS, "q")
     h = like_rank(jnp.asarray(dt).astype(q.dtype)[..., None], q)
@@ -475,31 +587,43 @@ def integrate_angular_velocity(
 
 
 @public
-def unwrap_euler(angles, seq: str, axis: int = 0):
+def unwrap_euler(angles: ArrayLike, seq: str, axis: int = 0) -> Array:
     """Continuous Euler angles from a time series of principal-range ones.
 
     Args:
-        angles: ``(..., T, ..., 3)`` Euler angles in radians, in the order of ``seq``, e.g. from
-            :func:`rotjax.quaternion_to_euler`; the last axis holds the three angles.
-        seq: axis sequence; see :func:`euler_rate_matrix`.
+        angles: `(..., T, ..., 3)` Euler angles in radians, in the order of `seq`, e.g. from
+            [`quaternion_to_euler`][rotjax.quaternion_to_euler]; the last axis holds the three
+            angles.
+        seq: axis sequence; see [`euler_rate_matrix`][rotjax.euler_rate_matrix].
         axis: the time axis (any integer-like value, any axis but the last).
 
     Returns:
-        Array of the same shape: at each sample, among the two solution sets and all ``2 pi``
-        shifts of each angle, the one nearest (sum of squared differences) to the previous
-        output sample. Every output sample describes the same rotation as its input. The first
-        sample is returned unchanged. A sample with a NaN or infinite angle is returned as it
-        is and skipped: the next finite sample is unwrapped against the last finite output.
+        Array of the same shape: at each sample, among the two solution sets and all `2 pi`
+            shifts of each angle, the one nearest (sum of squared differences) to the previous
+            output sample. Every output sample describes the same rotation as its input. The first
+            sample is returned unchanged. A sample with a NaN or infinite angle is returned as it
+            is and skipped: the next finite sample is unwrapped against the last finite output.
 
     Note:
-        The second solution set is ``(a0 + pi, pi - a1, a2 + pi)`` for Tait-Bryan sequences and
-        ``(a0 + pi, -a1, a2 + pi)`` for proper Euler sequences (the MapleSim seed's
-        ``a1 +- pi`` and ``a1`` are wrong; see the tests). A middle angle that runs through
+        The second solution set is `(a0 + pi, pi - a1, a2 + pi)` for Tait-Bryan sequences and
+        `(a0 + pi, -a1, a2 + pi)` for proper Euler sequences (the MapleSim seed's
+        `a1 +- pi` and `a1` are wrong; see the tests). A middle angle that runs through
         the edge of its principal range therefore continues smoothly past it. Only the sum or
         difference of the outer angles is defined at exact gimbal lock; there the choice
         follows the previous sample, so the output stays continuous if the input sampling
-        resolves the motion (steps well below ``pi / 2``). Implemented with ``lax.scan`` and
+        resolves the motion (steps well below `pi / 2`). Implemented with `lax.scan` and
         no data-dependent branches.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        yaw = jnp.deg2rad(jnp.array([170.0, 179.0, -172.0]))  # crosses +-180 deg
+        angles = jnp.stack([yaw, jnp.zeros(3), jnp.zeros(3)], axis=-1)
+        print(jnp.rad2deg(rj.unwrap_euler(angles, "ZYX")[:, 0]).round(1))
+        # [170. 179. 188.]
+        ```
     """
     (a,), dt = as_float(angles)
     check_shape(a, (3,), "angles")
@@ -522,7 +646,7 @@ def unwrap_euler(angles, seq: str, axis: int = 0):
         prev, seen = carry
         # A non-finite sample is returned as it is and leaves the reference untouched: the next
         # finite sample is unwrapped against the last finite output (or passed through unchanged
-        # if none came before). Double where: ``prev`` is made finite before the arithmetic.
+        # if none came before). Double where: `prev` is made finite before the arithmetic.
         ok = jnp.all(jnp.isfinite(sample), axis=-1, keepdims=True)
         ref = jnp.where(seen, prev, 0.0)
         s = jnp.where(ok, sample, 0.0)
@@ -557,16 +681,16 @@ def _time_axis(axis, ndim: int, name: str, shape) -> int:
 
 
 def _rate_derivative_terms(E, rates, seq):
-    """``(dE/dt) @ rates`` from the columns ``c_n`` of ``E`` (either frame).
+    """`(dE/dt) @ rates` from the columns `c_n` of `E` (either frame).
 
-    Write ``R`` as the product of its three elementary rotations, outermost first (angle order
-    for an intrinsic ``seq``, reversed for an extrinsic one). A column belonging to an inner
+    Write `R` as the product of its three elementary rotations, outermost first (angle order
+    for an intrinsic `seq`, reversed for an extrinsic one). A column belonging to an inner
     factor turns with the angular velocity of the factors outside it, so
-    ``dc_inner/dt = sum_outer a_outer' c_outer x c_inner`` in both frames (in the body frame the
+    `dc_inner/dt = sum_outer a_outer' c_outer x c_inner` in both frames (in the body frame the
     outer factors turn the inner axes the opposite way, as seen from the body, and the cross
     product order makes up for it). Hence
-    ``(dE/dt) a' = sum_{outer < inner} a_outer' a_inner' (c_outer x c_inner)``: for angle order
-    ``(0, 1, 2)`` the pairs ``(0, 1), (0, 2), (1, 2)`` with sign ``+1`` (intrinsic) or ``-1``
+    `(dE/dt) a' = sum_{outer < inner} a_outer' a_inner' (c_outer x c_inner)`: for angle order
+    `(0, 1, 2)` the pairs `(0, 1), (0, 2), (1, 2)` with sign `+1` (intrinsic) or `-1`
     (extrinsic, where the outer factor of each pair is the later angle).
     """
     _, intrinsic = parse_seq(seq)
@@ -582,27 +706,38 @@ def _rate_derivative_terms(E, rates, seq):
 
 @public
 def euler_accelerations_to_angular_acceleration(
-    angles, rates, accelerations, seq: str, frame: str = "body"
-):
+    angles: ArrayLike, rates: ArrayLike, accelerations: ArrayLike, seq: str, frame: str = "body"
+) -> Array:
     """Angular acceleration of a body whose Euler angles move with the given rates and
     accelerations.
 
     Args:
-        angles: ``(..., 3)`` Euler angles in radians, in the order of ``seq``.
-        rates: ``(..., 3)`` angle rates (rad per unit time).
-        accelerations: ``(..., 3)`` angle accelerations (rad per unit time squared). The three
+        angles: `(..., 3)` Euler angles in radians, in the order of `seq`.
+        rates: `(..., 3)` angle rates (rad per unit time).
+        accelerations: `(..., 3)` angle accelerations (rad per unit time squared). The three
             arrays broadcast against each other.
-        seq: axis sequence; see :func:`euler_rate_matrix`.
-        frame: ``"body"``: ``alpha = d/dt omega_body``, components in body axes; ``"world"``:
-            ``alpha = d/dt omega_world``, components in world axes. The two are related by
-            ``alpha_world = R @ alpha_body`` (the term ``dR/dt @ omega_body`` vanishes, as
-            ``omega x omega = 0``).
+        seq: axis sequence; see [`euler_rate_matrix`][rotjax.euler_rate_matrix].
+        frame: `"body"`: `alpha = d/dt omega_body`, components in body axes; `"world"`:
+            `alpha = d/dt omega_world`, components in world axes. The two are related by
+            `alpha_world = R @ alpha_body` (the term `dR/dt @ omega_body` vanishes, as
+            `omega x omega = 0`).
 
     Returns:
-        ``(..., 3)`` ``alpha = E(a) @ a'' + (dE/dt) @ a'``, with ``E`` the
-        :func:`euler_rate_matrix` and ``(dE/dt) a'`` in closed form: the sum over the pairs of
-        elementary rotations of ``outer rate * inner rate * (c_outer x c_inner)`` (``c`` the
-        columns of ``E``). Smooth and finite everywhere, gimbal lock included.
+        `(..., 3)` `alpha = E(a) @ a'' + (dE/dt) @ a'`, with `E` the
+            [`euler_rate_matrix`][rotjax.euler_rate_matrix] and `(dE/dt) a'` in closed form: the sum
+            over the pairs of elementary rotations of `outer rate * inner rate * (c_outer x
+            c_inner)` (`c` the columns of `E`). Smooth and finite everywhere, gimbal lock included.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        alpha = rj.euler_accelerations_to_angular_acceleration(
+            [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], "ZYX"
+        )
+        print(alpha.round(6))  # constant yaw rate at zero pitch and roll: no acceleration
+        # [0. 0. 0.]
+        ```
     """
     (a, r, acc), dt = as_float(angles, rates, accelerations)
     check_shape(a, (3,), "angles")
@@ -614,29 +749,46 @@ def euler_accelerations_to_angular_acceleration(
 
 @public
 def angular_acceleration_to_euler_accelerations(
-    angles, rates, alpha, seq: str, frame: str = "body", damping=0.0
-):
-    """Euler-angle accelerations that produce the angular acceleration ``alpha``.
+    angles: ArrayLike,
+    rates: ArrayLike,
+    alpha: ArrayLike,
+    seq: str,
+    frame: str = "body",
+    damping: ArrayLike = 0.0,
+) -> Array:
+    """Euler-angle accelerations that produce the angular acceleration `alpha`.
 
     Args:
-        angles: ``(..., 3)`` Euler angles in radians, in the order of ``seq``.
-        rates: ``(..., 3)`` angle rates (rad per unit time).
-        alpha: ``(..., 3)`` angular acceleration in ``frame`` (see
-            :func:`euler_accelerations_to_angular_acceleration`). The three arrays broadcast.
-        seq: axis sequence; see :func:`euler_rate_matrix`.
-        frame: ``"body"`` or ``"world"``.
-        damping: ``(...)`` non-negative damping ``d``, traced, as in
-            :func:`angular_velocity_to_euler_rates`: ``0`` gives the exact
-            ``E^-1 (alpha - (dE/dt) a')``, ``d > 0`` the damped least-squares solution of
-            ``E a'' = alpha - (dE/dt) a'``.
+        angles: `(..., 3)` Euler angles in radians, in the order of `seq`.
+        rates: `(..., 3)` angle rates (rad per unit time).
+        alpha: `(..., 3)` angular acceleration in `frame` (see
+            [`euler_accelerations_to_angular_acceleration`][rotjax.euler_accelerations_to_angular_acceleration]).
+            The three arrays broadcast.
+        seq: axis sequence; see [`euler_rate_matrix`][rotjax.euler_rate_matrix].
+        frame: `"body"` or `"world"`.
+        damping: `(...)` non-negative damping `d`, traced, as in
+            [`angular_velocity_to_euler_rates`][rotjax.angular_velocity_to_euler_rates]: `0` gives
+            the exact `E^-1 (alpha - (dE/dt) a')`, `d > 0` the damped least-squares solution of `E
+            a'' = alpha - (dE/dt) a'`.
 
     Returns:
-        ``(..., 3)`` angle accelerations (rad per unit time squared).
+        `(..., 3)` angle accelerations (rad per unit time squared).
 
     Note:
-        *At gimbal lock with* ``damping=0`` the result is non-finite, and near lock it grows
-        like ``1/euler_singularity`` (for the part of ``alpha`` the angles cannot follow).
-        With ``damping > 0`` it is finite everywhere, with finite gradients.
+        *At gimbal lock with* `damping=0` the result is non-finite, and near lock it grows
+        like `1/euler_singularity` (for the part of `alpha` the angles cannot follow).
+        With `damping > 0` it is finite everywhere, with finite gradients.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        angles, rates = [0.3, 0.2, 0.1], [0.5, -0.2, 1.0]
+        acc = [0.1, 0.2, 0.3]
+        alpha = rj.euler_accelerations_to_angular_acceleration(angles, rates, acc, "ZYX")
+        print(rj.angular_acceleration_to_euler_accelerations(angles, rates, alpha, "ZYX").round(6))
+        # [0.1 0.2 0.3]
+        ```
     """
     (a, r, al), dt = as_float(angles, rates, alpha)
     check_shape(a, (3,), "angles")
@@ -658,10 +810,10 @@ _GAUSS = (0.5 - np.sqrt(3.0) / 6.0, 0.5 + np.sqrt(3.0) / 6.0)
 def _gauss_weights(n_samples: int):
     """Lagrange weights that interpolate the two Gauss nodes of each step from samples.
 
-    Step ``k`` (from sample ``k`` to ``k + 1``) uses ``p = min(4, n_samples)`` consecutive
-    samples starting at ``s_k = clip(k - 1, 0, n_samples - p)``: centred (a cubic through
-    ``k - 1 .. k + 2``) inside, one-sided at the two ends. Returns the start indices ``(T,)``
-    and the weights ``(T, 2, p)`` in float64.
+    Step `k` (from sample `k` to `k + 1`) uses `p = min(4, n_samples)` consecutive
+    samples starting at `s_k = clip(k - 1, 0, n_samples - p)`: centred (a cubic through
+    `k - 1 .. k + 2`) inside, one-sided at the two ends. Returns the start indices `(T,)`
+    and the weights `(T, 2, p)` in float64.
     """
     p = min(4, n_samples)
     k = np.arange(n_samples - 1)
@@ -677,8 +829,8 @@ def _gauss_weights(n_samples: int):
 
 
 def _step_rotvecs(w, h, frame, method):
-    """Rotation vectors ``phi_k`` of the steps, ``q_{k+1} = q_k exp(phi_k)`` (body) or
-    ``exp(phi_k) q_k`` (world); ``w`` is ``(T + 1, ..., 3)``, ``h`` broadcasts against it."""
+    """Rotation vectors `phi_k` of the steps, `q_{k+1} = q_k exp(phi_k)` (body) or
+    `exp(phi_k) q_k` (world); `w` is `(T + 1, ..., 3)`, `h` broadcasts against it."""
     # Magnus series of q' = q (w, 0) / 2 (body) or (w, 0) q / 2 (world). For two samples
     # a (earlier) and b (later) the commutator term is the body-frame coning correction
     # + c h^2 (a x b) (Bortz's phi' = w + phi x w / 2), and its mirror - c h^2 (a x b) in the
@@ -703,40 +855,57 @@ def _step_rotvecs(w, h, frame, method):
 
 @public(time_leading=("omega",))
 def integrate_angular_velocity_samples(
-    q0, omega, dt, frame: str = "body", method: str = "magnus4", scalar_first: bool = False
-):
+    q0: ArrayLike,
+    omega: ArrayLike,
+    dt: ArrayLike,
+    frame: str = "body",
+    method: str = "magnus4",
+    scalar_first: bool = False,
+) -> Array:
     """Attitude history from angular-velocity samples (a gyro log) taken at equal intervals.
 
     Args:
-        q0: ``(..., 4)`` attitude at the first sample time; need not be unit.
-        omega: ``(T + 1, ..., 3)`` angular velocity in ``frame`` sampled at ``t0 + k dt``,
-            ``k = 0 .. T`` (time on axis 0, batch dimensions after it, broadcasting against
-            ``q0``), in rad per unit time.
-        dt: sample interval, a scalar or ``(...)`` broadcasting against the batch; any sign.
-        frame: ``"body"`` (gyro axes, ``q' = q * (omega, 0) / 2``) or ``"world"``
-            (``q' = (omega, 0) * q / 2``).
-        method: how ``omega`` is read between samples:
+        q0: `(..., 4)` attitude at the first sample time; need not be unit.
+        omega: `(T + 1, ..., 3)` angular velocity in `frame` sampled at `t0 + k dt`,
+            `k = 0 .. T` (time on axis 0, batch dimensions after it, broadcasting against
+            `q0`), in rad per unit time.
+        dt: sample interval, a scalar or `(...)` broadcasting against the batch; any sign.
+        frame: `"body"` (gyro axes, `q' = q * (omega, 0) / 2`) or `"world"`
+            (`q' = (omega, 0) * q / 2`).
+        method: how `omega` is read between samples:
 
-            * ``"hold"``: each sample held over the step that follows it, ``q_{k+1} =
-              q_k exp(omega_k dt)`` (the last sample is not used). First order on smooth data.
-            * ``"trapezoid"``: ``omega`` linear between samples, with the commutator (coning)
+            * `"hold"`: each sample held over the step that follows it, `q_{k+1} =
+              q_k exp(omega_k dt)` (the last sample is not used). First order on smooth data.
+            * `"trapezoid"`: `omega` linear between samples, with the commutator (coning)
               term; second order.
-            * ``"magnus4"`` (default): fourth-order Magnus step with two Gauss nodes, ``omega``
+            * `"magnus4"` (default): fourth-order Magnus step with two Gauss nodes, `omega`
               at the nodes from a cubic through the four nearest samples (one-sided at the
               ends); fourth order. With fewer than four samples the cubic becomes a polynomial
               through all of them.
-        scalar_first: quaternions are ``(w, x, y, z)``.
+        scalar_first: quaternions are `(w, x, y, z)`.
 
     Returns:
-        ``(T + 1, ..., 4)`` unit quaternions at the sample times, in the layout of ``q0``; the
-        first is ``q0`` normalised. Consecutive outputs are continuous (no hemisphere is
-        imposed).
+        `(T + 1, ..., 4)` unit quaternions at the sample times, in the layout of `q0`; the
+            first is `q0` normalised. Consecutive outputs are continuous (no hemisphere is
+            imposed).
 
     Note:
         Each step is an exact rotation (an exponential map, whose Taylor branch keeps values
-        and gradients exact at ``omega = 0``), so the norm does not drift. The steps are
-        composed with ``lax.associative_scan``: depth ``O(log T)``. The zero ``q0`` gives NaN;
+        and gradients exact at `omega = 0`), so the norm does not drift. The steps are
+        composed with `lax.associative_scan`: depth `O(log T)`. The zero `q0` gives NaN;
         a NaN sample affects the attitudes from the steps that read it onwards.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        t = jnp.linspace(0.0, 1.0, 11)  # 11 gyro samples, dt = 0.1
+        omega = jnp.stack([jnp.zeros_like(t), jnp.zeros_like(t), 2 * t], axis=-1)
+        q = rj.integrate_angular_velocity_samples([0.0, 0.0, 0.0, 1.0], omega, 0.1)
+        print(q.shape, rj.quaternion_to_rotvec(q[-1]).round(6))  # angle t^2 at t = 1
+        # (11, 4) [0. 0. 1.]
+        ```
     """
     q, w, out_dt = _propagation_args(q0, omega, frame, method, SAMPLE_METHODS, "q0")
     if w.ndim < 2:
@@ -764,25 +933,36 @@ def integrate_angular_velocity_samples(
 
 
 @public
-def unwrap_quaternion(q, axis: int = 0, scalar_first: bool = False):
+def unwrap_quaternion(q: ArrayLike, axis: int = 0, scalar_first: bool = False) -> Array:
     """Quaternion time series with consecutive samples in the same hemisphere.
 
     Args:
-        q: ``(..., T, ..., 4)`` quaternions; need not be unit. The last axis holds the
+        q: `(..., T, ..., 4)` quaternions; need not be unit. The last axis holds the
             components.
         axis: the time axis (any integer-like value, any axis but the last).
-        scalar_first: quaternions are ``(w, x, y, z)`` (the layout is kept).
+        scalar_first: quaternions are `(w, x, y, z)` (the layout is kept).
 
     Returns:
-        Array of the same shape, each sample ``q_k`` or ``-q_k`` (the same rotation), such that
-        ``q_k . q_{k+1} >= 0`` between consecutive finite samples. The first finite sample
-        keeps its sign. A dot product of exactly 0 keeps the sign.
+        Array of the same shape, each sample `q_k` or `-q_k` (the same rotation), such that
+            `q_k . q_{k+1} >= 0` between consecutive finite samples. The first finite sample
+            keeps its sign. A dot product of exactly 0 keeps the sign.
 
     Note:
         Samples with a NaN or infinite component are returned unchanged and skipped: the sign
         of the next finite sample is chosen against the last finite sample before it, so a bad
         sample neither flips nor poisons the rest of the series. Implemented with a cumulative
         maximum (the last finite index) and a cumulative product of signs: no sequential loop.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = [[0.0, 0.0, 0.6, 0.8], [0.0, 0.0, -0.7, -0.71], [0.0, 0.0, 0.8, 0.6]]
+        print(rj.unwrap_quaternion(q))  # the middle sample flips to the same hemisphere
+        # [[ 0.    0.    0.6   0.8 ]
+        #  [-0.   -0.    0.7   0.71]
+        #  [ 0.    0.    0.8   0.6 ]]
+        ```
     """
     (x,), dt = as_float(q)
     check_shape(x, (4,), "q")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._eigen import nearest_quaternion
 from ._numerics import (
@@ -61,11 +63,11 @@ def _hemisphere_scale(v, sq):
 
 @jax.custom_jvp
 def _shepperd(R):
-    """Shepperd extraction, scalar last, ``w >= 0``: the selected column of ``K`` over its norm.
+    """Shepperd extraction, scalar last, `w >= 0`: the selected column of `K` over its norm.
 
     Written for XLA:CPU: every step is a per-rotation scalar expression (no reduction over a
-    stacked axis); the four components are selected first and the scale ``rsqrt(|c|^2)`` is
-    computed from them; with :func:`rsqrt` (multiplications and additions only) XLA emits a
+    stacked axis); the four components are selected first and the scale `rsqrt(|c|^2)` is
+    computed from them; with `rsqrt` (multiplications and additions only) XLA emits a
     single transposing loop that reads the matrix once. JAX differentiates this code itself:
     every operation has a finite derivative wherever it is reached (the divisor is at least
     ``t^2``), and at a switch of the selected column it is the derivative of the branch taken.
@@ -128,16 +130,16 @@ def _shepperd_jvp(primals, tangents):
 
 
 def _k_times(cols, p):
-    """``K p`` for the symmetric ``K`` given by its columns, on per-rotation components."""
+    """`K p` for the symmetric `K` given by its columns, on per-rotation components."""
     return [sum(cols[i][c] * p[i] for i in range(4)) for c in range(4)]
 
 
 def _markley(R):
-    """Shepperd's quaternion refined by one power-iteration step with ``K``, ``w >= 0``.
+    """Shepperd's quaternion refined by one power-iteration step with `K`, `w >= 0`.
 
-    ``K = 4 q q^T`` (+ noise) has eigenvalues 4, 0, 0, 0 for a rotation, so one product removes
+    `K = 4 q q^T` (+ noise) has eigenvalues 4, 0, 0, 0 for a rotation, so one product removes
     the O(sigma) error of the selected column and leaves O(sigma^2). Per-rotation scalar
-    expressions throughout, as in :func:`_shepperd` (the Shepperd quaternion is not stacked
+    expressions throughout, as in `_shepperd` (the Shepperd quaternion is not stacked
     and unstacked in between: that cost a transposing loop).
     """
     cols, diag = _scaled_k(R)
@@ -158,53 +160,66 @@ def _from_matrix(R, method: str):
 
 
 @public
-def matrix_to_quaternion(R, method: str = "shepperd", scalar_first: bool = False):
-    """Quaternion of a rotation matrix, with ``w >= 0``.
+def matrix_to_quaternion(
+    R: ArrayLike, method: str = "shepperd", scalar_first: bool = False
+) -> Array:
+    """Quaternion of a rotation matrix, with `w >= 0`.
 
     Args:
-        R: ``(..., 3, 3)`` active rotation matrix (``v_world = R @ v_body``). A passive
+        R: `(..., 3, 3)` active rotation matrix (`v_world = R @ v_body`). A passive
             direction-cosine matrix, as in Kamman's notes, must be transposed first.
         method: how to treat matrices that are not exactly orthogonal:
 
-            * ``"shepperd"`` (default): branch-free largest-component extraction (Shepperd 1978;
-              Baruh/Kamman Eqs. 5-8; Markley 2008). The column of ``K = 4 q q^T`` with the
-              largest diagonal is selected with nested ``jnp.where`` and normalised once. Exact
+            * `"shepperd"` (default): branch-free largest-component extraction (Shepperd 1978;
+              Baruh/Kamman Eqs. 5-8; Markley 2008). The column of `K = 4 q q^T` with the
+              largest diagonal is selected with nested `jnp.where` and normalised once. Exact
               to about 1 eps for rotation matrices; error O(sigma) for noise sigma.
-            * ``"markley"``: the Shepperd column followed by one power-iteration step with ``K``.
+            * `"markley"`: the Shepperd column followed by one power-iteration step with `K`.
               About 35 more flops; brings noisy matrices to within O(sigma^2) of optimal.
-            * ``"optimal"``: the quaternion of the nearest rotation (Bar-Itzhack 2000): the top
-              eigenvector of the symmetric 4x4 ``K`` by rotjax's elementwise eigen kernel
-              (a one-sided Jacobi SVD of ``R``, fixed sweeps; no LAPACK). Any input, ``det < 0``
+            * `"optimal"`: the quaternion of the nearest rotation (Bar-Itzhack 2000): the top
+              eigenvector of the symmetric 4x4 `K` by rotjax's elementwise eigen kernel
+              (a one-sided Jacobi SVD of `R`, fixed sweeps; no LAPACK). Any input, `det < 0`
               included. Slowest: see the performance page.
-        scalar_first: return ``(w, x, y, z)``.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion with ``w >= 0`` (at exactly 180 degrees, ``w = 0`` and the
-        sign is that of the selected component; with ``"optimal"``, wherever ``|w| <= 4 eps``,
-        so that the rounding of the input does not flip the sign).
+        `(..., 4)` unit quaternion with `w >= 0` (at exactly 180 degrees, `w = 0` and the
+            sign is that of the selected component; with `"optimal"`, wherever `|w| <= 4 eps`,
+            so that the rounding of the input does not flip the sign).
 
     Note:
-        *Scale.* ``K`` is built homogeneous (its diagonal ``1 = |q|^2`` replaced by
-        ``t = |R|_F / sqrt(3)``, which adds ``(t - 1) I`` and changes no eigenvector), and
-        ``R`` is scaled by an exact power of two when its largest entry is outside
-        ``[0.5, 2)``: every method gives the same unit quaternion, to a few eps, for ``s R``
-        as for ``R``, for any ``s > 0`` from 1e-30 to 1e30 (float32) or 1e-300 to 1e300
+        *Scale.* `K` is built homogeneous (its diagonal `1 = |q|^2` replaced by
+        `t = |R|_F / sqrt(3)`, which adds `(t - 1) I` and changes no eigenvector), and
+        `R` is scaled by an exact power of two when its largest entry is outside
+        `[0.5, 2)`: every method gives the same unit quaternion, to a few eps, for `s R`
+        as for `R`, for any `s > 0` from 1e-30 to 1e30 (float32) or 1e-300 to 1e300
         (float64). A rotation matrix is not rescaled. The zero matrix, or any infinite or NaN
         entry, gives NaN (in that batch element only).
 
         *Singular points.* No sqrt or division is applied to a small number: the selected
-        column has squared norm at least ``t^2``, so every method is finite and differentiable
+        column has squared norm at least `t^2`, so every method is finite and differentiable
         at the identity and at every 180-degree rotation.
 
-        *Gradients.* ``jax.grad`` and ``jax.jvp`` give the derivative of the function computed,
-        in every 3x3 direction, on and off SO(3): a perturbation ``R @ S`` with ``S``
-        symmetric (scaling, shear) moves ``"shepperd"`` and ``"markley"`` as it moves their
+        *Gradients.* `jax.grad` and `jax.jvp` give the derivative of the function computed,
+        in every 3x3 direction, on and off SO(3): a perturbation `R @ S` with `S`
+        symmetric (scaling, shear) moves `"shepperd"` and `"markley"` as it moves their
         formulas. Where the selected column switches (off SO(3) the result jumps there), it
-        is the derivative of the branch taken. ``"shepperd"`` has a hand-written rule for
+        is the derivative of the branch taken. `"shepperd"` has a hand-written rule for
         reverse-mode speed, equal to JAX's derivative of its code (tested). For the derivative
         of "the rotation nearest to this matrix", which ignores such perturbations to first
-        order, use ``"optimal"``: its gradient is that of the top eigenvector, finite while
+        order, use `"optimal"`: its gradient is that of the top eigenvector, finite while
         the top eigenvalue is simple (always, for matrices near a rotation).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        R = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # 90 deg about z
+        print(rj.matrix_to_quaternion(R).round(6))
+        # [0.       0.       0.707107 0.707107]
+        print(rj.matrix_to_quaternion(R, scalar_first=True).round(6))
+        # [0.707107 0.       0.       0.707107]
+        ```
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")

@@ -1,9 +1,11 @@
-"""Modified Rodrigues parameters (MRP): ``p = axis * tan(angle / 4)``."""
+"""Modified Rodrigues parameters (MRP): `p = axis * tan(angle / 4)`."""
 
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._numerics import (
     as_float,
@@ -19,21 +21,30 @@ from ._quaternion import _prescaled_parts, _stack
 
 
 @public
-def quaternion_to_mrp(q, scalar_first: bool = False):
-    """Modified Rodrigues parameters of a quaternion, on the shorter side (``|p| <= 1``).
+def quaternion_to_mrp(q: ArrayLike, scalar_first: bool = False) -> Array:
+    """Modified Rodrigues parameters of a quaternion, on the shorter side (`|p| <= 1`).
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit (zero gives NaN).
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion; need not be unit (zero gives NaN).
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 3)`` MRP ``v / (|q| + |w|)`` with the sign of ``w``: ``axis * tan(angle / 4)``
-        for the rotation angle in ``[0, pi]``, as scipy's ``as_mrp``.
+        `(..., 3)` MRP `v / (|q| + |w|)` with the sign of `w`: `axis * tan(angle / 4)`
+            for the rotation angle in `[0, pi]`, as scipy's `as_mrp`.
 
     Note:
-        The denominator is at least ``|q|``, so the map is smooth away from ``w = 0``. At
-        exactly 180 degrees (``w = 0``) both ``p`` and ``-p`` (norm 1) describe the rotation;
-        ``w = 0`` is taken as positive, and the gradient is that of that side (finite).
+        The denominator is at least `|q|`, so the map is smooth away from `w = 0`. At
+        exactly 180 degrees (`w = 0`) both `p` and `-p` (norm 1) describe the rotation;
+        `w = 0` is taken as positive, and the gradient is that of that side (finite).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = rj.axis_angle_to_quaternion([0.0, 0.0, 1.0], 90.0, degrees=True)
+        print(rj.quaternion_to_mrp(q).round(6))  # tan(90 deg / 4)
+        # [0.       0.       0.414214]
+        ```
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
@@ -47,20 +58,28 @@ def quaternion_to_mrp(q, scalar_first: bool = False):
 
 
 @public
-def mrp_to_quaternion(mrp, scalar_first: bool = False):
+def mrp_to_quaternion(mrp: ArrayLike, scalar_first: bool = False) -> Array:
     """Unit quaternion of modified Rodrigues parameters.
 
     Args:
-        mrp: ``(..., 3)`` MRP ``axis * tan(angle / 4)``, any norm (``p`` and ``-p / |p|^2`` are
+        mrp: `(..., 3)` MRP `axis * tan(angle / 4)`, any norm (`p` and `-p / |p|^2` are
             the same rotation).
-        scalar_first: return ``(w, x, y, z)``.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion ``(2 p, 1 - |p|^2) / (1 + |p|^2)`` (``w >= 0`` iff
-        ``|p| <= 1``).
+        `(..., 4)` unit quaternion `(2 p, 1 - |p|^2) / (1 + |p|^2)` (`w >= 0` iff
+            `|p| <= 1`).
 
     Note:
         Smooth everywhere, with no singular point: the denominator is at least 1.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.mrp_to_quaternion([0.0, 0.0, 1.0]).round(6))  # 180 deg about z
+        # [0. 0. 1. 0.]
+        ```
     """
     (p,), dt = as_float(mrp)
     check_shape(p, (3,), "mrp")

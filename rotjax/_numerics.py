@@ -2,12 +2,12 @@
 
 Everything here is private. The helpers follow two rules that the public functions rely on:
 
-* thresholds are functions of the dtype (``_eps``), never fixed constants;
+* thresholds are functions of the dtype (`_eps`), never fixed constants;
 * any operation that is singular somewhere is guarded by the *double where* pattern: the
   dangerous operand is replaced by a harmless value before the operation, so that the branch not
   taken cannot send NaN (or inf) into the gradient;
-* every matrix product (``dot_general``) asks for full precision (:data:`FULL`): on GPUs a
-  float32 ``dot`` at JAX's default precision may run in TF32 (10-bit mantissa), and on TPUs in
+* every matrix product (`dot_general`) asks for full precision (`FULL`): on GPUs a
+  float32 `dot` at JAX's default precision may run in TF32 (10-bit mantissa), and on TPUs in
   bfloat16 passes.
 """
 
@@ -29,13 +29,13 @@ FULL = jax.lax.Precision.HIGHEST
 
 
 def matmul(a, b):
-    """``a @ b`` at full precision on every backend (see :data:`FULL`)."""
+    """`a @ b` at full precision on every backend (see `FULL`)."""
     return jnp.matmul(a, b, precision=FULL)
 
 
 def matvec(a, x):
-    """``a @ x`` for small ``(..., n, n)`` and ``(..., n)``, broadcasting: elementwise products
-    and a sum, which XLA fuses into the surrounding loop (no ``dot``, so no precision setting
+    """`a @ x` for small `(..., n, n)` and `(..., n)`, broadcasting: elementwise products
+    and a sum, which XLA fuses into the surrounding loop (no `dot`, so no precision setting
     and the same bits however the batch dimensions broadcast)."""
     return jnp.sum(a * x[..., None, :], axis=-1)
 
@@ -51,15 +51,15 @@ _RSQRT_START = {
 
 @jax.custom_jvp
 def rsqrt(x):
-    """``1 / sqrt(x)`` for positive, normal, finite float32 or float64 ``x``, from
+    """`1 / sqrt(x)` for positive, normal, finite float32 or float64 `x`, from
     multiplications and additions only.
 
-    XLA counts ``rsqrt``, ``sqrt`` and division as expensive and will not recompute them inside
+    XLA counts `rsqrt`, `sqrt` and division as expensive and will not recompute them inside
     a consumer that reads each result more than once, so a per-rotation scale stacked into
-    ``(..., 4)`` costs a loop of its own, which reads the input again. This form fuses. Initial
-    guess from the bits of ``x`` (Lomont's constants), then Newton steps ``y (3 - x y^2) / 2``,
-    the last one written as a correction ``y + y (1/2 - x y^2 / 2)`` so that its rounding
-    error is that of a small term: at most 0.63 eps in each dtype, as for ``lax.rsqrt``
+    `(..., 4)` costs a loop of its own, which reads the input again. This form fuses. Initial
+    guess from the bits of `x` (Lomont's constants), then Newton steps `y (3 - x y^2) / 2`,
+    the last one written as a correction `y + y (1/2 - x y^2 / 2)` so that its rounding
+    error is that of a small term: at most 0.63 eps in each dtype, as for `lax.rsqrt`
     (checked against mpmath in the tests). Outside the domain (zero, subnormal, infinite) the
     result is meaningless; NaN gives NaN.
     """
@@ -83,7 +83,7 @@ def _rsqrt_jvp(primals, tangents):
 
 
 def eps(dtype) -> float:
-    """Machine epsilon of ``dtype`` as a Python float."""
+    """Machine epsilon of `dtype` as a Python float."""
     return float(np.finfo(dtype).eps)
 
 
@@ -94,8 +94,8 @@ def as_float(*xs):
     bfloat16 and float16 are computed in float32.
 
     Returns:
-        ``(arrays, out_dtype)``: the converted arrays (a tuple, one per input) and the dtype the
-        results should be cast back to.
+        `(arrays, out_dtype)`: the converted arrays (a tuple, one per input) and the dtype the
+            results should be cast back to.
     """
     arrs = [jnp.asarray(x) for x in xs]
     dt = jnp.result_type(*arrs)
@@ -107,11 +107,11 @@ def as_float(*xs):
 
 
 def check_shape(x, trailing: tuple[int, ...], name: str) -> None:
-    """Raise ``ValueError`` at trace time unless ``x.shape`` ends with ``trailing``.
+    """Raise `ValueError` at trace time unless `x.shape` ends with `trailing`.
 
     Args:
-        x: the array, after :func:`as_float`.
-        trailing: the shape its last axes must have, e.g. ``(3, 3)``.
+        x: the array, after `as_float`.
+        trailing: the shape its last axes must have, e.g. `(3, 3)`.
         name: the argument's name, for the message.
     """
     n = len(trailing)
@@ -121,15 +121,15 @@ def check_shape(x, trailing: tuple[int, ...], name: str) -> None:
 
 
 def like_rank(c, x, dtype=None):
-    """``c`` (an array or constant of trailing shape, e.g. ``(4,)``) in ``dtype`` (default:
-    ``x``'s), with leading unit axes up to ``x``'s rank: it broadcasts against ``x`` under
-    ``jax_numpy_rank_promotion="raise"`` (an explicit, not an implicit, rank promotion)."""
+    """`c` (an array or constant of trailing shape, e.g. `(4,)`) in `dtype` (default:
+    `x`'s), with leading unit axes up to `x`'s rank: it broadcasts against `x` under
+    `jax_numpy_rank_promotion="raise"` (an explicit, not an implicit, rank promotion)."""
     c = jnp.asarray(c, dtype=x.dtype if dtype is None else dtype)
     return c.reshape((1,) * (x.ndim - c.ndim) + c.shape)
 
 
 def to_scalar_last(q, scalar_first: bool):
-    """Reorder a quaternion to the internal scalar-last ``(x, y, z, w)`` layout."""
+    """Reorder a quaternion to the internal scalar-last `(x, y, z, w)` layout."""
     return jnp.roll(q, -1, axis=-1) if scalar_first else q
 
 
@@ -139,14 +139,14 @@ def from_scalar_last(q, scalar_first: bool):
 
 
 def exponent_scale(x):
-    """``(s, 1 / s)``, powers of two with ``s |x|`` in ``[1, 2)``, for finite normal ``x``.
+    """`(s, 1 / s)`, powers of two with `s |x|` in `[1, 2)`, for finite normal `x`.
 
     Read off the exponent field with integer arithmetic, so both are exact and multiplying by
-    them adds no rounding (a division or ``jnp.frexp`` would cost as much as the rest of a
+    them adds no rounding (a division or `jnp.frexp` would cost as much as the rest of a
     conversion and keep XLA from fusing the scaling into its consumers). The exponent is
-    clamped so that both factors stay normal: a zero or subnormal ``x`` gets ``s = 2^(emax-1)``
-    and ``s x`` lies in ``[eps, 1)``; an infinite or NaN ``x`` gets ``s = 2^(emin)`` and stays
-    infinite or NaN. Pass ``lax.stop_gradient(x)``: the factor is piecewise constant.
+    clamped so that both factors stay normal: a zero or subnormal `x` gets `s = 2^(emax-1)`
+    and `s x` lies in `[eps, 1)`; an infinite or NaN `x` gets `s = 2^(emin)` and stays
+    infinite or NaN. Pass `lax.stop_gradient(x)`: the factor is piecewise constant.
     """
     info = jnp.finfo(x.dtype)
     ity = {4: jnp.uint32, 8: jnp.uint64}[jnp.dtype(x.dtype).itemsize]
@@ -160,9 +160,9 @@ def exponent_scale(x):
 
 
 def unit_scale(big):
-    """A power of two ``s`` (exact) that brings a largest magnitude ``big`` into ``[0.5, 2)``:
+    """A power of two `s` (exact) that brings a largest magnitude `big` into `[0.5, 2)`:
     1 where it is there already (unit quaternions, rotation matrices: their results are the
-    same bits as unscaled), else that of :func:`exponent_scale`, so that squares and products of
+    same bits as unscaled), else that of `exponent_scale`, so that squares and products of
     the scaled values can neither overflow nor underflow. Piecewise constant: no derivative
     flows through it (the functions scaled by it do not depend on the scale)."""
     big = jax.lax.stop_gradient(big)
@@ -171,14 +171,14 @@ def unit_scale(big):
 
 
 def select(cond, a, b, dtype):
-    """``jnp.where(cond, a, b)`` for Python numbers ``a`` and ``b``, as an array of ``dtype``.
-    On two Python numbers ``jnp.where`` makes an array of the default type, float64 with x64 on,
+    """`jnp.where(cond, a, b)` for Python numbers `a` and `b`, as an array of `dtype`.
+    On two Python numbers `jnp.where` makes an array of the default type, float64 with x64 on,
     which a float32 program would then compute and convert in every loop that reads it."""
     return jnp.where(cond, jnp.asarray(a, dtype), jnp.asarray(b, dtype))
 
 
 def max_abs(*xs):
-    """Elementwise largest ``|x|`` over per-element arrays (``jnp.maximum``, not ``jnp.max``
+    """Elementwise largest `|x|` over per-element arrays (`jnp.maximum`, not `jnp.max`
     over a stacked axis: XLA:CPU splits a reduction into loops of its own). A NaN operand gives
     NaN."""
     out = jnp.abs(xs[0])
@@ -189,11 +189,11 @@ def max_abs(*xs):
 
 def scaled_norm(x):
     """Euclidean norm over the last axis at any finite scale, with the gradient of
-    :func:`safe_norm` (zero at the origin, the true derivative elsewhere).
+    `safe_norm` (zero at the origin, the true derivative elsewhere).
 
-    The vector is scaled by a power of two so that its largest component is in ``[1, 2)``
+    The vector is scaled by a power of two so that its largest component is in `[1, 2)`
     before squaring, and the norm scaled back: no overflow or underflow of the squares (the
-    norm of ``(1e-160, 0, 0)`` is ``1e-160``, not 0).
+    norm of `(1e-160, 0, 0)` is `1e-160`, not 0).
     """
     s, inv = exponent_scale(jax.lax.stop_gradient(max_abs(*jnp.moveaxis(x, -1, 0))))
     return safe_norm(x * s[..., None]) * inv
@@ -211,7 +211,7 @@ def safe_norm(x, axis=-1):
 
 
 def safe_atan2(y, x):
-    """``atan2`` whose gradient is finite (zero) at ``y = x = 0``, where it returns 0."""
+    """`atan2` whose gradient is finite (zero) at `y = x = 0`, where it returns 0."""
     zero = (x == 0) & (y == 0)
     return jnp.where(zero, 0.0, jnp.arctan2(jnp.where(zero, 0.0, y), jnp.where(zero, 1.0, x)))
 
@@ -224,7 +224,7 @@ def cross(a, b):
 
 
 def hat(v):
-    """Skew-symmetric matrix ``[v]x`` with ``hat(v) @ u == cross(v, u)``; shape ``(..., 3, 3)``."""
+    """Skew-symmetric matrix `[v]x` with `hat(v) @ u == cross(v, u)`; shape `(..., 3, 3)`."""
     x, y, z = jnp.moveaxis(v, -1, 0)
     o = jnp.zeros_like(x)
     rows = ((o, -z, y), (z, o, -x), (-y, x, o))
@@ -233,7 +233,7 @@ def hat(v):
 
 
 def vee(m):
-    """Inverse of :func:`hat` on the antisymmetric part of ``m``: ``(..., 3, 3) -> (..., 3)``."""
+    """Inverse of `hat` on the antisymmetric part of `m`: `(..., 3, 3) -> (..., 3)`."""
     return 0.5 * jnp.stack(
         [m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]],
         axis=-1,
@@ -244,9 +244,9 @@ def vee(m):
 STATIC_ARGS = ("seq", "degrees", "scalar_first", "method", "frame", "axis")
 
 # Trailing (non-batch) rank of each array argument, by the name the public functions give it:
-# ``(..., 4)`` quaternions, ``(..., 3, 3)`` matrices, ``(..., 3)`` and ``(..., 6)`` vectors,
-# ``(...)`` per-rotation scalars. A set or time axis counts as batch (``weights`` is
-# ``(..., N)`` against ``(..., N, 3)`` vectors).
+# `(..., 4)` quaternions, `(..., 3, 3)` matrices, `(..., 3)` and `(..., 6)` vectors,
+# `(...)` per-rotation scalars. A set or time axis counts as batch (`weights` is
+# `(..., N)` against `(..., N, 3)` vectors).
 _TRAILING_RANK = {
     **dict.fromkeys(("p", "q", "q_a", "q_b", "q_dot"), 1),
     **dict.fromkeys(("R", "R_a", "R_b", "R_dot"), 2),
@@ -256,12 +256,12 @@ _TRAILING_RANK = {
 
 
 def _broadcast_batches(arrays: dict) -> None:
-    """Check that the batch shapes of the array arguments in ``arrays`` (name -> array, updated
-    in place) broadcast, else raise ``ValueError`` naming both arguments and shapes (rather
+    """Check that the batch shapes of the array arguments in `arrays` (name -> array, updated
+    in place) broadcast, else raise `ValueError` naming both arguments and shapes (rather
     than a shape error from deep inside JAX); then give them leading unit axes up to a common
     batch rank, so that batches of different ranks broadcast with the explicit rank promotion
-    that ``jax_numpy_rank_promotion="raise"`` allows. Trailing shapes are checked later, by
-    :func:`check_shape` in the function."""
+    that `jax_numpy_rank_promotion="raise"` allows. Trailing shapes are checked later, by
+    `check_shape` in the function."""
     lead = {
         n: jnp.shape(x)[: jnp.ndim(x) - _TRAILING_RANK[n]]
         for n, x in arrays.items()
@@ -311,31 +311,31 @@ def _check_array(name: str, value) -> None:
 def public(fun=None, *, static=(), time_leading=()):
     """Jit-wrap a public function, with the configuration arguments it takes made static.
 
-    ``static``: further argument names to make static (flags of that function alone, such as
-    ``extrinsic``). ``time_leading``: array arguments whose first axis is time, before the
+    `static`: further argument names to make static (flags of that function alone, such as
+    `extrinsic`). `time_leading`: array arguments whose first axis is time, before the
     batch axes (a gyro log); the function broadcasts them itself, so they take no part in the
     batch-shape check below.
 
     Parsing and validation of those arguments then happens once, in Python, at trace time:
     errors are raised eagerly and cost nothing on later calls. Before the function body runs,
 
-    * ``seq``, ``method`` and ``frame`` must be ``str``, ``degrees`` and ``scalar_first``
-      ``bool`` (or a NumPy bool) and ``axis`` an integer (a NumPy integer included); otherwise
-      ``TypeError``. Unknown values raise ``ValueError`` in the function, listing the valid
+    * `seq`, `method` and `frame` must be `str`, `degrees` and `scalar_first`
+      `bool` (or a NumPy bool) and `axis` an integer (a NumPy integer included); otherwise
+      `TypeError`. Unknown values raise `ValueError` in the function, listing the valid
       ones;
-    * complex arrays raise ``TypeError``;
-    * the array arguments' batch shapes must broadcast (``ValueError`` naming both), and get
-      leading unit axes up to a common rank (:func:`_broadcast_batches`).
+    * complex arrays raise `TypeError`;
+    * the array arguments' batch shapes must broadcast (`ValueError` naming both), and get
+      leading unit axes up to a common rank (`_broadcast_batches`).
 
-    A static argument that cannot be hashed (``seq`` as a list) fails in ``jax.jit`` before
+    A static argument that cannot be hashed (`seq` as a list) fails in `jax.jit` before
     any of this; the wrapper then runs the same checks to raise the clear error instead.
     """
     if fun is None:
         return functools.partial(public, static=static, time_leading=time_leading)
     sig = inspect.signature(fun)
     params = sig.parameters
-    # ``seq`` is static wherever it appears; the other names only as keyword options with a
-    # default (so an array argument that happens to be called ``axis`` stays traced).
+    # `seq` is static wherever it appears; the other names only as keyword options with a
+    # default (so an array argument that happens to be called `axis` stays traced).
     static = [
         n
         for n, p in params.items()
@@ -382,12 +382,12 @@ def public(fun=None, *, static=(), time_leading=()):
     return call
 
 
-# A gap below ``TIE_ULPS * eps * scale`` is a tie in exact arithmetic: LAPACK resolves the
+# A gap below `TIE_ULPS * eps * scale` is a tie in exact arithmetic: LAPACK resolves the
 # eigenvalues and singular values of these small matrices to a few ulps of the largest one.
 TIE_ULPS = 64.0
 
 
 def safe_div(num, den, tol):
-    """``num / den`` where ``|den| > tol``, else 0 (double where: the gradient stays finite)."""
+    """`num / den` where `|den| > tol`, else 0 (double where: the gradient stays finite)."""
     small = jnp.abs(den) <= tol
     return jnp.where(small, 0.0, num / jnp.where(small, 1.0, den))

@@ -1,15 +1,15 @@
 """Coordinate partitioning of a constraint Jacobian (Nikravesh, App. C).
 
-For ``m`` constraints ``Phi(q) = 0`` on ``n`` coordinates, L-U factorisation with full pivoting
-of the ``m x n`` Jacobian ``Phi_q`` picks ``m`` well-conditioned columns as the dependent
-(basic) coordinates ``u`` and leaves the other ``n - m`` as the independent (nonbasic) ones
-``v``. With the rows and columns permuted, ``P Phi_q Q = L [U1 U2]``, so
-``Phi_u = L U1`` and ``Phi_v = L U2`` (Eqs. C.1, C.2) and the influence-coefficient matrix is
+For `m` constraints `Phi(q) = 0` on `n` coordinates, L-U factorisation with full pivoting
+of the `m x n` Jacobian `Phi_q` picks `m` well-conditioned columns as the dependent
+(basic) coordinates `u` and leaves the other `n - m` as the independent (nonbasic) ones
+`v`. With the rows and columns permuted, `P Phi_q Q = L [U1 U2]`, so
+`Phi_u = L U1` and `Phi_v = L U2` (Eqs. C.1, C.2) and the influence-coefficient matrix is
 
     H = -U1^-1 U2 = -Phi_u^-1 Phi_v                                     (Eqs. C.3, C.4)
 
-(``L`` cancels). Differentiating ``Phi(q) = 0`` gives ``Phi_u du + Phi_v dv = 0``, hence
-``du = H dv`` (C.5) and ``u_dot = H v_dot`` (C.6).
+(`L` cancels). Differentiating `Phi(q) = 0` gives `Phi_u du + Phi_v dv = 0`, hence
+`du = H dv` (C.5) and `u_dot = H v_dot` (C.6).
 """
 
 from __future__ import annotations
@@ -18,21 +18,23 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from ._numerics import as_float, eps, public
 
 
 class Partition(NamedTuple):
-    """Result of :func:`partition_coordinates` (all arrays share the batch shape ``...``).
+    """Result of [`partition_coordinates`][rotjax.partition_coordinates] (all arrays share the batch
+    shape `...`).
 
     Attributes:
-        dependent: ``(..., m)`` integer column indices of the dependent coordinates ``u``, in
+        dependent: `(..., m)` integer column indices of the dependent coordinates `u`, in
             pivot order.
-        independent: ``(..., n - m)`` integer column indices of the independent coordinates
-            ``v``, in the order of the columns of ``influence``.
-        influence: ``(..., m, n - m)`` ``H = -Phi_u^-1 Phi_v``, so that ``du = H dv`` and
-            ``u_dot = H v_dot``.
-        rank: ``(...)`` integer number of pivots above the tolerance.
+        independent: `(..., n - m)` integer column indices of the independent coordinates
+            `v`, in the order of the columns of `influence`.
+        influence: `(..., m, n - m)` `H = -Phi_u^-1 Phi_v`, so that `du = H dv` and
+            `u_dot = H v_dot`.
+        rank: `(...)` integer number of pivots above the tolerance.
     """
 
     dependent: jax.Array
@@ -42,7 +44,7 @@ class Partition(NamedTuple):
 
 
 def _swap(x, i, j, axis):
-    """Swap entries ``i`` (static) and ``j`` (``(...)``, traced) of ``x`` along ``axis``."""
+    """Swap entries `i` (static) and `j` (`(...)`, traced) of `x` along `axis`."""
     size = x.shape[axis]
     idx = jnp.arange(size).reshape((1,) * j.ndim + (size,))
     jj = j[..., None]
@@ -55,10 +57,10 @@ def _swap(x, i, j, axis):
 
 
 def _eliminate(A, rows, cols):
-    """Gaussian elimination with full pivoting on ``(..., m, n)`` ``A`` (unrolled, static ``m``).
+    """Gaussian elimination with full pivoting on `(..., m, n)` `A` (unrolled, static `m`).
 
-    Returns the upper-trapezoidal factor ``U`` (the eliminated part below the diagonal is
-    zeroed), the row and column permutations and the pivots ``U[p, p]``.
+    Returns the upper-trapezoidal factor `U` (the eliminated part below the diagonal is
+    zeroed), the row and column permutations and the pivots `U[p, p]`.
     """
     m, n = A.shape[-2:]
     lead = (1,) * (A.ndim - 2)
@@ -87,34 +89,45 @@ def _eliminate(A, rows, cols):
 
 
 @public
-def partition_coordinates(jacobian, tol=None):
+def partition_coordinates(jacobian: ArrayLike, tol: float | None = None) -> Partition:
     """Split coordinates into dependent and independent ones by L-U with full pivoting.
 
     Args:
-        jacobian: ``(..., m, n)`` constraint Jacobian ``Phi_q`` with ``m <= n`` (rows:
+        jacobian: `(..., m, n)` constraint Jacobian `Phi_q` with `m <= n` (rows:
             constraints; columns: coordinates).
-        tol: pivot tolerance, a scalar or ``(...)``; ``None`` (default) uses
-            ``max(m, n) * eps * max|Phi_q|`` per batch element (``eps`` of the dtype).
+        tol: pivot tolerance, a scalar or `(...)`; `None` (default) uses
+            `max(m, n) * eps * max|Phi_q|` per batch element (`eps` of the dtype).
 
     Returns:
-        :class:`Partition` ``(dependent, independent, influence, rank)``:
-        ``dependent`` ``(..., m)`` column indices of ``u`` (in pivot order), ``independent``
-        ``(..., n - m)`` those of ``v``, ``influence`` ``(..., m, n - m)``
-        ``H = -Phi_u^-1 Phi_v`` (Nikravesh Eq. C.4) with ``du = H dv`` and ``u_dot = H v_dot``
-        (C.5, C.6), and ``rank`` ``(...)`` the number of leading pivots whose magnitude exceeds
-        ``tol``. Each pivot is the largest remaining entry, so the first dependent coordinate is
-        the column of the largest ``|Phi_q|`` entry: for the Euler-parameter constraint
-        ``2 e^T`` it is the largest ``|e_i|``.
+        A `Partition` named tuple `(dependent, independent, influence, rank)`:
+            `dependent` `(..., m)` column indices of `u` (in pivot order), `independent`
+            `(..., n - m)` those of `v`, `influence` `(..., m, n - m)`
+            `H = -Phi_u^-1 Phi_v` (Nikravesh Eq. C.4) with `du = H dv` and `u_dot = H v_dot`
+            (C.5, C.6), and `rank` `(...)` the number of leading pivots whose magnitude
+            exceeds `tol`. Each pivot is the largest remaining entry, so the first dependent
+            coordinate is the column of the largest `|Phi_q|` entry: for the Euler-parameter
+            constraint `2 e^T` it is the largest `|e_i|`.
 
     Note:
-        *Rank-deficient Jacobians* (``rank = r < m``): full pivoting moves the ``m - r``
-        redundant constraints to the bottom, as in the appendix. Then only ``dependent[:r]``
-        are determined by the constraints; ``dependent[r:]`` are free, like ``independent``.
-        ``influence[..., :r, :]`` gives ``du[:r] = H[:r] dv`` for motions that keep
-        ``dependent[r:]`` fixed, and ``influence[..., r:, :]`` is NaN (no ``H`` exists). A NaN
+        *Rank-deficient Jacobians* (`rank = r < m`): full pivoting moves the `m - r`
+        redundant constraints to the bottom, as in the appendix. Then only `dependent[:r]`
+        are determined by the constraints; `dependent[r:]` are free, like `independent`.
+        `influence[..., :r, :]` gives `du[:r] = H[:r] dv` for motions that keep
+        `dependent[r:]` fixed, and `influence[..., r:, :]` is NaN (no `H` exists). A NaN
         in the Jacobian gives NaN influence in its batch element. The tie-break among equal
-        magnitudes is the first in row-major order. Gradients of ``influence`` are those of
+        magnitudes is the first in row-major order. Gradients of `influence` are those of
         the factorisation computed (the pivot order is piecewise constant).
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        # One constraint x + 2 y - z = 0 on three coordinates (x, y, z).
+        part = rj.partition_coordinates(jnp.array([[1.0, 2.0, -1.0]]))
+        print(part.dependent, part.independent, part.rank)
+        # [1] [0 2] 1
+        ```
     """
     (A,), dt = as_float(jacobian)
     if A.ndim < 2:

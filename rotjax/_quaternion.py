@@ -1,8 +1,8 @@
 """Quaternion algebra and the quaternion -> matrix map.
 
-Internally every quaternion is scalar last, ``(x, y, z, w)``; ``scalar_first=True`` reorders at the
+Internally every quaternion is scalar last, `(x, y, z, w)`; `scalar_first=True` reorders at the
 boundary. Functions that interpret a quaternion as a rotation normalise it, at any finite non-zero
-scale (an exact power-of-two prescaling, :func:`_prescaled`); the algebraic functions (product,
+scale (an exact power-of-two prescaling, `_prescaled`); the algebraic functions (product,
 conjugate) do not, because kinematics needs them on non-unit quaternions.
 """
 
@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._numerics import (
     as_float,
@@ -84,13 +86,13 @@ def _conjugate(q):
 
 
 def _normalize(q):
-    """``q / |q|`` for ``q`` at any finite scale (:func:`_prescaled` first); NaN for the zero
+    """`q / |q|` for `q` at any finite scale (`_prescaled` first); NaN for the zero
     quaternion (0/0, on purpose: it is not a rotation) and for a non-finite component."""
     return _renormalize(_prescaled(q))
 
 
 def _renormalize(q):
-    """``q / |q|`` for ``q`` of order 1, computed from unit or prescaled quaternions (a step of
+    """`q / |q|` for `q` of order 1, computed from unit or prescaled quaternions (a step of
     an integrator, a product): no scaling, whose cost would be that of the step. The squared
     norm is a sum of four squares: XLA:CPU runs a reduction over the last axis as a loop of its
     own."""
@@ -134,66 +136,106 @@ def _angle(q):
 
 
 @public
-def quaternion_to_matrix(q, scalar_first: bool = False):
+def quaternion_to_matrix(q: ArrayLike, scalar_first: bool = False) -> Array:
     """Rotation matrix of a quaternion.
 
     Args:
-        q: ``(..., 4)`` quaternion, scalar last ``(x, y, z, w)`` unless ``scalar_first``; need not
+        q: `(..., 4)` quaternion, scalar last `(x, y, z, w)` unless `scalar_first`; need not
             be unit (it is normalised; any finite non-zero scale gives the same matrix, to a
             few eps: 1e-30 to 1e30 in float32, 1e-300 to 1e300 in float64; zero, infinite or
             NaN components give NaN).
-        scalar_first: read ``q`` as ``(w, x, y, z)``.
+        scalar_first: read `q` as `(w, x, y, z)`.
 
     Returns:
-        ``(..., 3, 3)`` active rotation matrix ``R`` with ``v_world = R @ v_body``. ``q`` and
-        ``-q`` give the same matrix.
+        `(..., 3, 3)` active rotation matrix `R` with `v_world = R @ v_body`. `q` and
+            `-q` give the same matrix.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = [0.0, 0.0, 0.6, 0.8]  # about z by 2 atan(0.6 / 0.8) = 73.7 deg
+        print(rj.quaternion_to_matrix(q).round(6))
+        # [[ 0.28 -0.96  0.  ]
+        #  [ 0.96  0.28  0.  ]
+        #  [ 0.    0.    1.  ]]
+        ```
     """
     q, dt = _prep(q, scalar_first)
     return _to_matrix_parts(*_prescaled_parts(q)[0]).astype(dt)
 
 
 @public
-def quaternion_multiply(p, q, scalar_first: bool = False):
-    """Hamilton product ``p * q``, so that ``R(p * q) = R(p) @ R(q)``.
+def quaternion_multiply(p: ArrayLike, q: ArrayLike, scalar_first: bool = False) -> Array:
+    """Hamilton product `p * q`, so that `R(p * q) = R(p) @ R(q)`.
 
     Args:
-        p: ``(..., 4)`` quaternion (layout as ``scalar_first``).
-        q: ``(..., 4)`` quaternion; broadcasts against ``p``.
-        scalar_first: quaternions are ``(w, x, y, z)``.
+        p: `(..., 4)` quaternion (layout as `scalar_first`).
+        q: `(..., 4)` quaternion; broadcasts against `p`.
+        scalar_first: quaternions are `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` the raw product. It is not normalised: its norm is ``|p| |q|``, which keeps
-        the product bilinear (kinematics relies on that).
+        `(..., 4)` the raw product. It is not normalised: its norm is `|p| |q|`, which keeps
+            the product bilinear (kinematics relies on that).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        x90 = [0.70710678, 0.0, 0.0, 0.70710678]  # 90 deg about x
+        z90 = [0.0, 0.0, 0.70710678, 0.70710678]  # 90 deg about z
+        print(rj.quaternion_multiply(z90, x90).round(6))  # x90 first, then z90
+        # [0.5 0.5 0.5 0.5]
+        ```
     """
     p, q, dt = _prep2(p, q, scalar_first)
     return from_scalar_last(_multiply(p, q), scalar_first).astype(dt)
 
 
 @public
-def quaternion_conjugate(q, scalar_first: bool = False):
-    """Conjugate ``(-x, -y, -z, w)``: the inverse rotation, with the same norm.
+def quaternion_conjugate(q: ArrayLike, scalar_first: bool = False) -> Array:
+    """Conjugate `(-x, -y, -z, w)`: the inverse rotation, with the same norm.
 
     Args:
-        q: ``(..., 4)`` quaternion.
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion.
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` conjugate, in the same layout.
+        `(..., 4)` conjugate, in the same layout.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.quaternion_conjugate([1.0, 2.0, 3.0, 4.0]))
+        # [-1. -2. -3.  4.]
+        ```
     """
     q, dt = _prep(q, scalar_first)
     return from_scalar_last(_conjugate(q), scalar_first).astype(dt)
 
 
 @public
-def quaternion_inverse(q, scalar_first: bool = False):
-    """Multiplicative inverse ``conj(q) / |q|^2``, so that ``q * inverse(q) = (0, 0, 0, 1)``.
+def quaternion_inverse(q: ArrayLike, scalar_first: bool = False) -> Array:
+    """Multiplicative inverse `conj(q) / |q|^2`, so that `q * inverse(q) = (0, 0, 0, 1)`.
 
     Args:
-        q: ``(..., 4)`` non-zero quaternion (the zero quaternion gives NaN).
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        q: `(..., 4)` non-zero quaternion (the zero quaternion gives NaN).
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` inverse, in the same layout.
+        `(..., 4)` inverse, in the same layout.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q = [0.0, 0.0, 1.2, 1.6]  # norm 2
+        print(rj.quaternion_inverse(q))
+        # [-0.  -0.  -0.3  0.4]
+        print(rj.quaternion_multiply(q, rj.quaternion_inverse(q)).round(6))
+        # [0. 0. 0. 1.]
+        ```
     """
     q, dt = _prep(q, scalar_first)
     (x, y, z, w), s = _prescaled_parts(q)  # conj(q) / |q|^2 = s conj(s q) / |s q|^2
@@ -203,31 +245,48 @@ def quaternion_inverse(q, scalar_first: bool = False):
 
 
 @public
-def quaternion_normalize(q, scalar_first: bool = False):
-    """Unit quaternion ``q / |q|``; the sign is kept (no hemisphere is imposed).
+def quaternion_normalize(q: ArrayLike, scalar_first: bool = False) -> Array:
+    """Unit quaternion `q / |q|`; the sign is kept (no hemisphere is imposed).
 
     Args:
-        q: ``(..., 4)`` quaternion. The zero quaternion gives NaN, on purpose.
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion. The zero quaternion gives NaN, on purpose.
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion, in the same layout.
+        `(..., 4)` unit quaternion, in the same layout.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.quaternion_normalize([0.0, 0.0, 3.0, 4.0]))
+        # [0.  0.  0.6 0.8]
+        ```
     """
     q, dt = _prep(q, scalar_first)
     return from_scalar_last(_normalize(q), scalar_first).astype(dt)
 
 
 @public
-def quaternion_apply(q, v, scalar_first: bool = False):
-    """Rotate vectors: ``R(q) @ v``.
+def quaternion_apply(q: ArrayLike, v: ArrayLike, scalar_first: bool = False) -> Array:
+    """Rotate vectors: `R(q) @ v`.
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit.
-        v: ``(..., 3)`` vectors; broadcasts against ``q``.
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion; need not be unit.
+        v: `(..., 3)` vectors; broadcasts against `q`.
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 3)`` rotated vectors.
+        `(..., 3)` rotated vectors.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        z90 = [0.0, 0.0, 0.70710678, 0.70710678]  # 90 deg about z
+        print(rj.quaternion_apply(z90, [1.0, 0.0, 0.0]).round(6))
+        # [-0.  1.  0.]
+        ```
     """
     (q, v), dt = as_float(q, v)
     check_shape(q, (4,), "q")
@@ -244,21 +303,32 @@ def quaternion_apply(q, v, scalar_first: bool = False):
 
 
 @public
-def relative_rotation(q_a, q_b, scalar_first: bool = False):
-    """Rotation from frame ``a`` to frame ``b``: ``q_rel = conj(q_a) * q_b``, normalised.
+def relative_rotation(q_a: ArrayLike, q_b: ArrayLike, scalar_first: bool = False) -> Array:
+    """Rotation from frame `a` to frame `b`: `q_rel = conj(q_a) * q_b`, normalised.
 
-    With ``R_a``, ``R_b`` the orientations of the two frames in a common (world) frame, the
-    result is ``R_rel = R_a.T @ R_b``: the orientation of ``b`` expressed in ``a``, so that
-    ``R_b = R_a @ R_rel`` and ``v_a = R_rel @ v_b``. This is the matrix the MapleSim
+    With `R_a`, `R_b` the orientations of the two frames in a common (world) frame, the
+    result is `R_rel = R_a.T @ R_b`: the orientation of `b` expressed in `a`, so that
+    `R_b = R_a @ R_rel` and `v_a = R_rel @ v_b`. This is the matrix the MapleSim
     relative-angle sensors decompose into Euler angles.
 
     Args:
-        q_a: ``(..., 4)`` orientation of frame ``a``; need not be unit.
-        q_b: ``(..., 4)`` orientation of frame ``b``; broadcasts against ``q_a``.
-        scalar_first: quaternions are ``(w, x, y, z)``.
+        q_a: `(..., 4)` orientation of frame `a`; need not be unit.
+        q_b: `(..., 4)` orientation of frame `b`; broadcasts against `q_a`.
+        scalar_first: quaternions are `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion of the relative rotation (sign as produced by the product).
+        `(..., 4)` unit quaternion of the relative rotation (sign as produced by the product).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        q_a = rj.axis_angle_to_quaternion([0.0, 0.0, 1.0], 30.0, degrees=True)
+        q_b = rj.axis_angle_to_quaternion([0.0, 0.0, 1.0], 75.0, degrees=True)
+        _, angle = rj.quaternion_to_axis_angle(rj.relative_rotation(q_a, q_b), degrees=True)
+        print(angle.round(4))
+        # 45.0
+        ```
     """
     qa, qb, dt = _prep2(q_a, q_b, scalar_first, ("q_a", "q_b"))
     rel = _renormalize(_multiply(_conjugate(_prescaled(qa)), _prescaled(qb)))
@@ -266,42 +336,61 @@ def relative_rotation(q_a, q_b, scalar_first: bool = False):
 
 
 @public
-def rotation_angle(q, scalar_first: bool = False):
-    """Rotation angle ``2 atan2(|q_v|, |w|)`` in ``[0, pi]``.
+def rotation_angle(q: ArrayLike, scalar_first: bool = False) -> Array:
+    """Rotation angle `2 atan2(|q_v|, |w|)` in `[0, pi]`.
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit.
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        q: `(..., 4)` quaternion; need not be unit.
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(...,)`` angle in radians, in ``[0, pi]``; ``q`` and ``-q`` give the same angle.
+        `(...,)` angle in radians, in `[0, pi]`; `q` and `-q` give the same angle.
 
     Note:
-        atan2 keeps full relative accuracy near 0 and near pi, where ``2 acos(w)`` loses half the
-        digits. Any finite non-zero scale of ``q`` gives the same angle; zero, infinite or NaN
+        atan2 keeps full relative accuracy near 0 and near pi, where `2 acos(w)` loses half the
+        digits. Any finite non-zero scale of `q` gives the same angle; zero, infinite or NaN
         components give NaN. At the identity the angle has a cone-shaped minimum and no
         derivative; the gradient returned there is 0 (the minimum-norm subgradient), finite. Use
         the squared angle as a smooth loss.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        print(rj.rotation_angle([0.0, 0.0, 1.0, 1.0]) / jnp.pi)  # 90 deg; need not be unit
+        # 0.5
+        ```
     """
     q, dt = _prep(q, scalar_first)
     return _angle(q).astype(dt)
 
 
 @public
-def angle_between(p, q, scalar_first: bool = False):
-    """Geodesic distance between two rotations: the angle of ``conj(p) * q``, in ``[0, pi]``.
+def angle_between(p: ArrayLike, q: ArrayLike, scalar_first: bool = False) -> Array:
+    """Geodesic distance between two rotations: the angle of `conj(p) * q`, in `[0, pi]`.
 
     Args:
-        p: ``(..., 4)`` quaternion; need not be unit.
-        q: ``(..., 4)`` quaternion; broadcasts against ``p``.
-        scalar_first: quaternions are ``(w, x, y, z)``.
+        p: `(..., 4)` quaternion; need not be unit.
+        q: `(..., 4)` quaternion; broadcasts against `p`.
+        scalar_first: quaternions are `(w, x, y, z)`.
 
     Returns:
-        ``(...,)`` angle in radians in ``[0, pi]``; invariant to the sign of ``p`` and of ``q``.
+        `(...,)` angle in radians in `[0, pi]`; invariant to the sign of `p` and of `q`.
 
     Note:
         Computed with atan2, so it is accurate at 0 and the gradient there is finite (0, the
-        minimum of the cone). See :func:`rotation_angle`.
+        minimum of the cone). See [`rotation_angle`][rotjax.rotation_angle].
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        p = rj.rotvec_to_quaternion([0.1, 0.0, 0.0])
+        q = rj.rotvec_to_quaternion([0.4, 0.0, 0.0])
+        print(rj.angle_between(p, q).round(6), rj.angle_between(p, -q).round(6))  # q or -q
+        # 0.3 0.3
+        ```
     """
     p, q, dt = _prep2(p, q, scalar_first)
     return _angle(_multiply(_conjugate(_prescaled(p)), _prescaled(q))).astype(dt)

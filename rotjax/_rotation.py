@@ -1,6 +1,6 @@
-"""``Rotation`` and ``Slerp``: scipy's transform API over rotjax's functions, as pytrees.
+"""`Rotation` and `Slerp`: scipy's transform API over rotjax's functions, as pytrees.
 
-The class holds one array, the ``(..., 4)`` scalar-last unit quaternion, and adds scipy's shape
+The class holds one array, the `(..., 4)` scalar-last unit quaternion, and adds scipy's shape
 bookkeeping and method names; every computation is one of rotjax's functions.
 """
 
@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import functools
 import warnings
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike, DTypeLike
 
 from ._algebra import (
     quaternion_canonical,
@@ -44,7 +47,7 @@ from ._rotvec import quaternion_to_rotvec, rotvec_to_quaternion
 
 
 def _float(x, dtype=None):
-    """``x`` as a JAX float array (integers to the default float; float32/64 kept)."""
+    """`x` as a JAX float array (integers to the default float; float32/64 kept)."""
     _check_array("input", x)
     x = jnp.asarray(x, dtype=dtype)
     if not jnp.issubdtype(x.dtype, jnp.floating):
@@ -53,10 +56,10 @@ def _float(x, dtype=None):
 
 
 def _concrete(x) -> np.ndarray | None:
-    """``x`` as NumPy if it is a host value (NumPy array, Python number or list), else ``None``.
+    """`x` as NumPy if it is a host value (NumPy array, Python number or list), else `None`.
 
     Value checks that scipy makes (negative weights, zero norms) are made only on such inputs:
-    they cost no device transfer, and under ``jit`` the values are never inspected.
+    they cost no device transfer, and under `jit` the values are never inspected.
     """
     if isinstance(x, jax.Array):  # tracers are jax.Array instances too
         return None
@@ -82,7 +85,7 @@ def _input(x):
 
 def _broadcast(*arrays, trailing, what="Cannot broadcast the batch shapes"):
     """Broadcast the leading (batch) shapes explicitly, so that rank promotion is never
-    implicit; ``trailing`` gives each array's core rank."""
+    implicit; `trailing` gives each array's core rank."""
     try:
         shape = np.broadcast_shapes(
             *(a.shape[: a.ndim - t] for a, t in zip(arrays, trailing, strict=True))
@@ -153,31 +156,51 @@ def _is_key(x) -> bool:
 
 @jax.tree_util.register_pytree_node_class
 class Rotation:
-    """Rotations in 3 dimensions, scipy's ``Rotation`` API on one JAX array.
+    """Rotations in 3 dimensions, scipy's `Rotation` API on one JAX array.
 
-    A ``Rotation`` holds a ``(..., 4)`` quaternion ``[x, y, z, w]`` (scalar last), the only
-    leaf of the pytree: ``jax.jit`` can take and return it, ``jax.vmap`` maps over its
-    leading (batch) axes, ``jax.grad`` differentiates through its methods and ``lax.scan``
-    carries it. A 1-D quaternion is a *single* rotation (``single`` is ``True``; no ``len``, no
-    indexing); ``(..., 4)`` holds a batch of shape ``shape``. float32 and float64 are kept.
+    A `Rotation` holds a `(..., 4)` quaternion `[x, y, z, w]` (scalar last), the only
+    leaf of the pytree: `jax.jit` can take and return it, `jax.vmap` maps over its
+    leading (batch) axes, `jax.grad` differentiates through its methods and `lax.scan`
+    carries it. A 1-D quaternion is a *single* rotation (`single` is `True`; no `len`, no
+    indexing); `(..., 4)` holds a batch of shape `shape`. float32 and float64 are kept.
 
-    Every method is one of rotjax's functions (``as_euler`` is
-    :func:`quaternion_to_euler`, ``apply`` is :func:`quaternion_apply`, ...), with their
-    accuracy and their gradients at the identity, at 180 degrees and at gimbal lock.
+    Every method is one of rotjax's functions (`as_euler` is
+    [`quaternion_to_euler`][rotjax.quaternion_to_euler], `apply` is
+    [`quaternion_apply`][rotjax.quaternion_apply], ...), with their accuracy and their
+    gradients at the identity, at 180 degrees and at gimbal lock.
 
-    Conventions (scipy's): ``as_matrix()`` is the active matrix, ``v_world = R @ v_body``;
-    ``p * q`` applies ``q`` first; Euler ``"XYZ"`` is intrinsic, ``"xyz"`` extrinsic.
+    Conventions (scipy's): `as_matrix()` is the active matrix, `v_world = R @ v_body`;
+    `p * q` applies `q` first; Euler `"XYZ"` is intrinsic, `"xyz"` extrinsic.
 
-    Values scipy rejects (zero-norm quaternions, matrices with ``det <= 0``, negative weights,
-    interpolation times out of range) raise ``ValueError`` only when they arrive as NumPy arrays
-    or Python numbers; as JAX arrays, and always under ``jit``, they are not inspected and the
+    Values scipy rejects (zero-norm quaternions, matrices with `det <= 0`, negative weights,
+    interpolation times out of range) raise `ValueError` only when they arrive as NumPy arrays
+    or Python numbers; as JAX arrays, and always under `jit`, they are not inspected and the
     result is NaN for the affected rotations.
 
     Args:
-        quat: ``(..., 4)`` quaternion(s); need not be unit.
-        normalize: normalise ``quat`` (set ``False`` only for unit quaternions).
+        quat: `(..., 4)` quaternion(s); need not be unit.
+        normalize: normalise `quat` (set `False` only for unit quaternions).
         copy: accepted for scipy compatibility (JAX arrays are immutable).
-        scalar_first: ``quat`` is ``[w, x, y, z]``.
+        scalar_first: `quat` is `[w, x, y, z]`.
+
+    Examples:
+        ```python
+        import jax
+        import jax.numpy as jnp
+        from rotjax import Rotation
+
+        r = Rotation.from_euler("z", 90.0, degrees=True)
+        print(r.apply([1.0, 0.0, 0.0]).round(6))
+        # [-0.  1.  0.]
+
+        @jax.jit
+        def yaw(r):  # a Rotation goes in and out of jit, vmap and grad
+            return r.as_euler("ZYX")[..., 0]
+
+        batch = Rotation.from_rotvec(jnp.array([[0.0, 0.0, 0.1], [0.0, 0.0, 0.2]]))
+        print(yaw(batch).round(6))
+        # [0.1 0.2]
+        ```
     """
 
     # The leaf is the quaternion as given (scalar last), of any non-zero norm: the readers
@@ -191,7 +214,9 @@ class Rotation:
     # return NotImplemented for unknown operands, so another class's reflected operator runs.
     __array_ufunc__ = None
 
-    def __init__(self, quat, normalize: bool = True, copy: bool = True, scalar_first: bool = False):
+    def __init__(
+        self, quat: ArrayLike, normalize: bool = True, copy: bool = True, scalar_first: bool = False
+    ):
         del copy  # JAX arrays are immutable: there is nothing to copy
         normalize = _check_static("normalize", normalize)
         scalar_first = _check_static("scalar_first", scalar_first)
@@ -219,7 +244,7 @@ class Rotation:
 
     @classmethod
     def _raw(cls, quat):
-        """A rotation holding the quaternion ``quat`` (any non-zero norm) as it is."""
+        """A rotation holding the quaternion `quat` (any non-zero norm) as it is."""
         r = object.__new__(cls)
         r._stored = quat
         return r
@@ -248,8 +273,8 @@ class Rotation:
         return tuple(self._stored.shape[:-1])
 
     @property
-    def quat(self):
-        """The stored ``(..., 4)`` unit quaternion, scalar last (jax.scipy's field)."""
+    def quat(self) -> Array:
+        """The stored `(..., 4)` unit quaternion, scalar last (jax.scipy's field)."""
         return self._quat
 
     def __len__(self) -> int:
@@ -276,13 +301,13 @@ class Rotation:
         return (indexer, Ellipsis)
 
     def __getitem__(self, indexer) -> Rotation:
-        """Rotations selected by ``indexer`` over the batch axes (as NumPy indexing)."""
+        """Rotations selected by `indexer` over the batch axes (as NumPy indexing)."""
         return Rotation._raw(self._stored[self._index(indexer)])
 
     def __setitem__(self, indexer, value: Rotation):
-        """Replace the selected rotations by ``value``.
+        """Replace the selected rotations by `value`.
 
-        JAX arrays are immutable: this builds a new quaternion array (``.at[...].set``) and
+        JAX arrays are immutable: this builds a new quaternion array (`.at[...].set`) and
         rebinds this object's leaf to it. Other references to the old array, and copies of
         this object made before (e.g. a pytree flattened earlier), are unchanged.
         """
@@ -300,27 +325,52 @@ class Rotation:
     # --- constructors --------------------------------------------------------------------
 
     @staticmethod
-    def from_quat(quat, *, scalar_first: bool = False) -> Rotation:
+    def from_quat(quat: ArrayLike, *, scalar_first: bool = False) -> Rotation:
         """From quaternion(s).
 
         Args:
-            quat: ``(..., 4)`` quaternion(s) ``[x, y, z, w]``; need not be unit (they are
+            quat: `(..., 4)` quaternion(s) `[x, y, z, w]`; need not be unit (they are
                 normalised; zero gives NaN, or ValueError for NumPy input).
-            scalar_first: ``quat`` is ``[w, x, y, z]``.
+            scalar_first: `quat` is `[w, x, y, z]`.
+
+        Returns:
+            The rotation(s), of batch shape `quat.shape[:-1]`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_quat([0.0, 0.0, 1.0, 1.0])  # normalised: 90 deg about z
+            print(r.as_quat().round(6))
+            # [0.       0.       0.707107 0.707107]
+            ```
         """
         return Rotation(quat, scalar_first=scalar_first)
 
     @staticmethod
-    def from_matrix(matrix, *, assume_valid: bool = False) -> Rotation:
+    def from_matrix(matrix: ArrayLike, *, assume_valid: bool = False) -> Rotation:
         """From rotation matrices.
 
         Args:
-            matrix: ``(..., 3, 3)`` active matrices (``v_world = R @ v_body``). Unless
-                ``assume_valid``, each is replaced by the nearest rotation matrix (Frobenius
-                norm; :func:`matrix_to_quaternion` with ``method="optimal"``) and a matrix with
-                ``det <= 0`` gives NaN (ValueError for NumPy input).
-            assume_valid: the matrices are rotations: use the cheaper ``"shepperd"`` method,
+            matrix: `(..., 3, 3)` active matrices (`v_world = R @ v_body`). Unless
+                `assume_valid`, each is replaced by the nearest rotation matrix (Frobenius
+                norm; [`matrix_to_quaternion`][rotjax.matrix_to_quaternion] with
+                `method="optimal"`) and a matrix with `det <= 0` gives NaN (ValueError for NumPy
+                input).
+            assume_valid: the matrices are rotations: use the cheaper `"shepperd"` method,
                 with no check.
+
+        Returns:
+            The rotation(s), of batch shape `matrix.shape[:-2]`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_matrix([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+            print(r.as_rotvec(degrees=True).round(4))
+            # [ 0.  0. 90.]
+            ```
         """
         m = _input(matrix)
         if m.ndim < 2 or m.shape[-2:] != (3, 3):
@@ -334,12 +384,24 @@ class Rotation:
         return Rotation._raw(_from_matrix_checked(m))
 
     @staticmethod
-    def from_rotvec(rotvec, degrees: bool = False) -> Rotation:
-        """From rotation vectors ``angle * axis``.
+    def from_rotvec(rotvec: ArrayLike, degrees: bool = False) -> Rotation:
+        """From rotation vectors `angle * axis`.
 
         Args:
-            rotvec: ``(..., 3)`` rotation vectors (radians, or degrees with ``degrees``).
+            rotvec: `(..., 3)` rotation vectors (radians, or degrees with `degrees`).
             degrees: the norms are in degrees.
+
+        Returns:
+            The rotation(s), of batch shape `rotvec.shape[:-1]`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_rotvec([[0.0, 0.0, 90.0], [180.0, 0.0, 0.0]], degrees=True)
+            print(r.shape, r.magnitude().round(6))
+            # (2,) [1.570796 3.141592]
+            ```
         """
         v = _input(rotvec)
         if v.ndim < 1 or v.shape[-1] != 3:
@@ -347,24 +409,54 @@ class Rotation:
         return Rotation._raw(rotvec_to_quaternion(v, degrees=degrees))
 
     @staticmethod
-    def from_mrp(mrp) -> Rotation:
-        """From modified Rodrigues parameters ``axis * tan(angle / 4)``, shape ``(..., 3)``."""
+    def from_mrp(mrp: ArrayLike) -> Rotation:
+        """From modified Rodrigues parameters `axis * tan(angle / 4)`.
+
+        Args:
+            mrp: `(..., 3)` modified Rodrigues parameters, any norm.
+
+        Returns:
+            The rotation(s), of batch shape `mrp.shape[:-1]`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_mrp([0.0, 0.0, 1.0])  # tan(180 deg / 4) = 1: a half turn about z
+            print(r.as_matrix().round(6))
+            # [[-1.  0.  0.]
+            #  [ 0. -1.  0.]
+            #  [ 0.  0.  1.]]
+            ```
+        """
         p = _input(mrp)
         if p.ndim < 1 or p.shape[-1] != 3:
             raise ValueError(f"Expected `mrp` to have shape (..., 3), got {p.shape}")
         return Rotation._raw(mrp_to_quaternion(p))
 
     @staticmethod
-    def from_euler(seq: str, angles, degrees: bool = False) -> Rotation:
+    def from_euler(seq: str, angles: ArrayLike, degrees: bool = False) -> Rotation:
         """From Euler angles about 1 to 3 axes.
 
         Args:
-            seq: 1 to 3 axis letters, uppercase for intrinsic (rotating axes, ``"ZXZ"``),
-                lowercase for extrinsic (fixed axes, ``"xyz"``); or three digits (``"313"``,
+            seq: 1 to 3 axis letters, uppercase for intrinsic (rotating axes, `"ZXZ"`),
+                lowercase for extrinsic (fixed axes, `"xyz"`); or three digits (`"313"`,
                 intrinsic). Consecutive axes must differ.
-            angles: ``(..., len(seq))`` angles; a scalar for one axis. A 1-D array of length
-                ``len(seq)`` is a single rotation.
+            angles: `(..., len(seq))` angles; a scalar for one axis. A 1-D array of length
+                `len(seq)` is a single rotation.
             degrees: angles are in degrees.
+
+        Returns:
+            The rotation(s), of batch shape `angles.shape[:-1]`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_euler("ZYX", [90.0, 0.0, 45.0], degrees=True)  # yaw, pitch, roll
+            print(r.as_euler("ZYX", degrees=True).round(4))
+            # [90.  0. 45.]
+            ```
         """
         if not isinstance(seq, str) or not 1 <= len(seq) <= 3:
             raise ValueError(
@@ -399,15 +491,30 @@ class Rotation:
         return Rotation._raw(euler_to_quaternion(a, seq, degrees=degrees))
 
     @staticmethod
-    def from_davenport(axes, order: str, angles, degrees: bool = False) -> Rotation:
+    def from_davenport(
+        axes: ArrayLike, order: str, angles: ArrayLike, degrees: bool = False
+    ) -> Rotation:
         """From Davenport angles: rotations about 1 to 3 given axes.
 
         Args:
-            axes: ``(K, 3)`` or ``(3,)`` axes (normalised here), ``K`` in 1..3; consecutive
+            axes: `(K, 3)` or `(3,)` axes (normalised here), `K` in 1..3; consecutive
                 axes must be orthogonal.
-            order: ``"e"``/``"extrinsic"`` (fixed axes) or ``"i"``/``"intrinsic"``.
-            angles: ``(..., K)`` angles (a scalar for one axis).
+            order: `"e"`/`"extrinsic"` (fixed axes) or `"i"`/`"intrinsic"`.
+            angles: `(..., K)` angles (a scalar for one axis).
             degrees: angles are in degrees.
+
+        Returns:
+            The rotation(s), of batch shape `angles.shape[:-1]`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            axes = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]  # about z, then about the new x
+            r = Rotation.from_davenport(axes, "intrinsic", [90.0, 30.0], degrees=True)
+            print(r.as_euler("ZXY", degrees=True).round(4))
+            # [90. 30.  0.]
+            ```
         """
         extrinsic = parse_order(order)
         ax = _float(axes)
@@ -435,13 +542,29 @@ class Rotation:
         return Rotation._raw(q)
 
     @staticmethod
-    def identity(num: int | None = None, dtype=None, *, shape=None) -> Rotation:
+    def identity(
+        num: int | None = None,
+        dtype: DTypeLike | None = None,
+        *,
+        shape: int | tuple[int, ...] | None = None,
+    ) -> Rotation:
         """The identity rotation.
 
         Args:
-            num: number of rotations (``None``: a single rotation).
-            dtype: float dtype (jax.scipy's second argument); JAX's default float if ``None``.
-            shape: batch shape, instead of ``num``.
+            num: number of rotations (`None`: a single rotation).
+            dtype: float dtype (jax.scipy's second argument); JAX's default float if `None`.
+            shape: batch shape, instead of `num`.
+
+        Returns:
+            The identity: a single rotation, or a batch of shape `(num,)` or `shape`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            print(Rotation.identity().as_quat(), Rotation.identity(shape=(2, 3)).shape)
+            # [0. 0. 0. 1.] (2, 3)
+            ```
         """
         if dtype is not None:
             try:
@@ -461,19 +584,38 @@ class Rotation:
         return Rotation._raw(_identity_quat(shape, dtype if dtype is not None else float))
 
     @staticmethod
-    def random(num=None, rng=None, *, shape=None, random_state=None) -> Rotation:
+    def random(
+        num: int | Array | None = None,
+        rng: np.random.Generator | int | Array | None = None,
+        *,
+        shape: int | tuple[int, ...] | None = None,
+        random_state: np.random.Generator | int | None = None,
+    ) -> Rotation:
         """Uniformly distributed random rotations.
 
         Args:
-            num: number of rotations (``None``: a single one). A JAX PRNG key here is taken as
-                jax.scipy's ``random(key, num)``.
-            rng: a ``numpy.random.Generator``, a seed for ``numpy.random.default_rng``, or a
+            num: number of rotations (`None`: a single one). A JAX PRNG key here is taken as
+                jax.scipy's `random(key, num)`.
+            rng: a `numpy.random.Generator`, a seed for `numpy.random.default_rng`, or a
                 JAX PRNG key. With NumPy, the samples equal scipy's for the same generator.
-            shape: batch shape, instead of ``num``.
-            random_state: scipy's former name of ``rng``, with its legacy meaning: a seed
-                seeds a ``numpy.random.RandomState``, which is used as it is; so is a
-                ``RandomState`` or a ``Generator``. With neither ``rng`` nor
-                ``random_state``, NumPy's global ``RandomState`` draws (as scipy's).
+            shape: batch shape, instead of `num`.
+            random_state: scipy's former name of `rng`, with its legacy meaning: a seed
+                seeds a `numpy.random.RandomState`, which is used as it is; so is a
+                `RandomState` or a `Generator`. With neither `rng` nor
+                `random_state`, NumPy's global `RandomState` draws (as scipy's).
+
+        Returns:
+            The random rotations: a single one, or a batch of shape `(num,)` or `shape`.
+
+        Examples:
+            ```python
+            import jax
+            from rotjax import Rotation
+
+            r = Rotation.random(1000, rng=jax.random.key(0))
+            print(r.shape, bool((r.magnitude() <= 3.1416).all()))
+            # (1000,) True
+            ```
         """
         if rng is not None and random_state is not None:
             raise TypeError(
@@ -501,8 +643,24 @@ class Rotation:
         return Rotation(sample)
 
     @staticmethod
-    def concatenate(rotations) -> Rotation:
-        """Concatenate rotations along the first batch axis (single ones count as one)."""
+    def concatenate(rotations: Rotation | Sequence[Rotation]) -> Rotation:
+        """Concatenate rotations along the first batch axis (single ones count as one).
+
+        Args:
+            rotations: a `Rotation` or a sequence of them.
+
+        Returns:
+            One `Rotation` holding them all, of batch shape `(N, ...)`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            both = Rotation.concatenate([Rotation.identity(), Rotation.random(3, rng=0)])
+            print(both.shape)
+            # (4,)
+            ```
+        """
         # The stored quaternions as they are (each keeps its norm), like indexing.
         if isinstance(rotations, Rotation):
             return Rotation._raw(jnp.asarray(rotations._stored))
@@ -513,33 +671,66 @@ class Rotation:
 
     @classmethod
     def create_group(cls, group: str, axis: str = "Z") -> Rotation:
-        """A finite rotation group: ``"Cn"``, ``"Dn"``, ``"T"``, ``"O"`` or ``"I"``.
+        """A finite rotation group: `"Cn"`, `"Dn"`, `"T"`, `"O"` or `"I"`.
 
-        See :func:`rotation_group`; ``axis`` (``"X"``, ``"Y"``, ``"Z"``) is the principal axis
-        of ``Cn`` and ``Dn``.
+        See [`rotation_group`][rotjax.rotation_group].
+
+        Args:
+            group: the group's name, `"Cn"` and `"Dn"` with a positive integer `n`.
+            axis: `"X"`, `"Y"` or `"Z"`: the principal axis of `Cn` and `Dn`.
+
+        Returns:
+            The group's elements, of batch shape `(order,)`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            print(len(Rotation.create_group("I")), len(Rotation.create_group("D6", axis="X")))
+            # 60 12
+            ```
         """
         return cls._raw(rotation_group(group, axis))
 
     @staticmethod
-    def align_vectors(a, b, weights=None, return_sensitivity: bool = False):
-        """Rotation that best maps vectors ``b`` onto ``a`` (Wahba's problem).
+    def align_vectors(
+        a: ArrayLike,
+        b: ArrayLike,
+        weights: ArrayLike | None = None,
+        return_sensitivity: bool = False,
+    ) -> tuple[Rotation, Array] | tuple[Rotation, Array, Array]:
+        """Rotation that best maps vectors `b` onto `a` (Wahba's problem).
 
-        Minimises ``sum_i w_i |a_i - R b_i|^2`` (:func:`align_vectors`). One infinite weight
-        (or a single vector pair) makes that pair primary: it is aligned exactly (the
-        smallest rotation taking ``b_i`` to ``a_i``), and the rotation about ``a_i`` minimises
+        Minimises `sum_i w_i |a_i - R b_i|^2` ([`align_vectors`][rotjax.align_vectors]). One
+        infinite weight (or a single vector pair) makes that pair primary: it is aligned exactly
+        (the smallest rotation taking `b_i` to `a_i`), and the rotation about `a_i` minimises
         the secondary pairs' loss (scipy's rule).
 
         Args:
-            a: ``(N, 3)`` or ``(3,)`` vectors in the reference frame.
-            b: ``(N, 3)`` or ``(3,)`` the same vectors in the body frame.
-            weights: ``(N,)`` non-negative weights (at most one infinite); ``None`` for ones.
+            a: `(N, 3)` or `(3,)` vectors in the reference frame.
+            b: `(N, 3)` or `(3,)` the same vectors in the body frame.
+            weights: `(N,)` non-negative weights (at most one infinite); `None` for ones.
             return_sensitivity: also return the sensitivity matrix
-                (:func:`wahba_sensitivity`); not defined with an infinite weight or one pair.
+                ([`wahba_sensitivity`][rotjax.wahba_sensitivity]); not defined with an
+                infinite weight or one pair.
 
         Returns:
-            ``(rotation, rssd)`` or ``(rotation, rssd, sensitivity)``: the single rotation, the
-            root of the weighted sum of squared distances ``|a_i - R b_i|`` (infinite weights
-            counting as 0) and the ``(3, 3)`` sensitivity matrix.
+            rotation (Rotation): the single best rotation.
+            rssd (Array): `()` the root of the weighted sum of squared distances
+                `|a_i - R b_i|` (infinite weights counting as 0).
+            sensitivity (Array): `(3, 3)` sensitivity matrix, only with `return_sensitivity`.
+
+        Examples:
+            ```python
+            import jax.numpy as jnp
+            from rotjax import Rotation
+
+            b = jnp.eye(3)
+            a = Rotation.from_euler("z", 30.0, degrees=True).apply(b)
+            r, rssd = Rotation.align_vectors(a, b)
+            print(r.as_euler("ZYX", degrees=True).round(4), rssd.round(6))
+            # [30.  0.  0.] 0.0
+            ```
         """
         a_in, b_in = _float(a), _float(b)
         dt = jnp.result_type(a_in.dtype, b_in.dtype)
@@ -589,37 +780,104 @@ class Rotation:
 
     # --- conversions ---------------------------------------------------------------------
 
-    def as_quat(self, canonical: bool = False, *, scalar_first: bool = False):
-        """The unit quaternion(s), ``(..., 4)``.
+    def as_quat(self, canonical: bool = False, *, scalar_first: bool = False) -> Array:
+        """The unit quaternion(s).
 
         Args:
-            canonical: pick the sign with ``w > 0`` (and, where ``w = 0``, the first non-zero
-                of ``x, y, z`` positive); otherwise the stored sign.
-            scalar_first: return ``[w, x, y, z]``.
+            canonical: pick the sign with `w > 0` (and, where `w = 0`, the first non-zero
+                of `x, y, z` positive); otherwise the stored sign.
+            scalar_first: return `[w, x, y, z]`.
+
+        Returns:
+            `(..., 4)` unit quaternions, scalar last unless `scalar_first`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_quat([0.0, 0.0, -0.6, -0.8])
+            print(r.as_quat(), r.as_quat(canonical=True))
+            # [ 0.   0.  -0.6 -0.8] [-0.  -0.   0.6  0.8]
+            ```
         """
         q = quaternion_canonical(self._quat) if canonical else self._quat
         return to_scalar_last(q, False) if not scalar_first else jnp.roll(q, 1, axis=-1)
 
-    def as_matrix(self):
-        """Active rotation matrices, ``(..., 3, 3)`` (``v_world = R @ v_body``)."""
+    def as_matrix(self) -> Array:
+        """Active rotation matrices (`v_world = R @ v_body`).
+
+        Returns:
+            `(..., 3, 3)` rotation matrices.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            print(Rotation.from_euler("x", 90.0, degrees=True).as_matrix().round(6))
+            # [[ 1.  0.  0.]
+            #  [ 0. -0. -1.]
+            #  [ 0.  1. -0.]]
+            ```
+        """
         return quaternion_to_matrix(self._stored)
 
-    def as_rotvec(self, degrees: bool = False):
-        """Rotation vectors ``angle * axis`` with angle in ``[0, pi]``, ``(..., 3)``."""
-        return quaternion_to_rotvec(self._stored, degrees=degrees)
-
-    def as_mrp(self):
-        """Modified Rodrigues parameters with norm at most 1, ``(..., 3)``."""
-        return quaternion_to_mrp(self._stored)
-
-    def as_euler(self, seq: str, degrees: bool = False, *, suppress_warnings: bool = False):
-        """Euler angles, ``(..., 3)``, in scipy's ranges (see :func:`quaternion_to_euler`).
+    def as_rotvec(self, degrees: bool = False) -> Array:
+        """Rotation vectors `angle * axis` with the angle in `[0, pi]`.
 
         Args:
-            seq: three axes, ``"XYZ"``-style intrinsic, ``"xyz"``-style extrinsic, or digits.
+            degrees: return the norm in degrees.
+
+        Returns:
+            `(..., 3)` rotation vectors.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            print(Rotation.from_euler("y", -30.0, degrees=True).as_rotvec(degrees=True).round(4))
+            # [  0. -30.   0.]
+            ```
+        """
+        return quaternion_to_rotvec(self._stored, degrees=degrees)
+
+    def as_mrp(self) -> Array:
+        """Modified Rodrigues parameters `axis * tan(angle / 4)`, norm at most 1.
+
+        Returns:
+            `(..., 3)` modified Rodrigues parameters.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            print(Rotation.from_euler("z", 90.0, degrees=True).as_mrp().round(6))  # tan(22.5 deg)
+            # [0.       0.       0.414214]
+            ```
+        """
+        return quaternion_to_mrp(self._stored)
+
+    def as_euler(
+        self, seq: str, degrees: bool = False, *, suppress_warnings: bool = False
+    ) -> Array:
+        """Euler angles in scipy's ranges (see [`quaternion_to_euler`][rotjax.quaternion_to_euler]).
+
+        Args:
+            seq: three axes, `"XYZ"`-style intrinsic, `"xyz"`-style extrinsic, or digits.
             degrees: return degrees.
             suppress_warnings: accepted for scipy compatibility: rotjax has no gimbal-lock
                 threshold and never warns (at exact lock the third angle is 0, as scipy).
+
+        Returns:
+            `(..., 3)` angles in the order of `seq`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_euler("ZYX", [30.0, 20.0, 10.0], degrees=True)
+            print(r.as_euler("ZYX", degrees=True).round(4))
+            # [30. 20. 10.]
+            ```
         """
         del suppress_warnings
         if not isinstance(seq, str) or len(seq) != 3:
@@ -627,17 +885,35 @@ class Rotation:
         parse_seq(seq)
         return quaternion_to_euler(self._stored, seq, degrees=degrees)
 
-    def as_davenport(self, axes, order: str, degrees: bool = False, *, suppress_warnings=False):
-        """Davenport angles about three axes, consecutive ones orthogonal, ``(..., 3)``.
+    def as_davenport(
+        self,
+        axes: ArrayLike,
+        order: str,
+        degrees: bool = False,
+        *,
+        suppress_warnings: bool = False,
+    ) -> Array:
+        """Davenport angles about three axes, consecutive ones orthogonal.
 
         Args:
-            axes: ``(..., 3, 3)`` the axes as rows; batch shape broadcasts with ``shape``.
-            order: ``"e"``/``"extrinsic"`` or ``"i"``/``"intrinsic"``.
+            axes: `(..., 3, 3)` the axes as rows; batch shape broadcasts with `shape`.
+            order: `"e"`/`"extrinsic"` or `"i"`/`"intrinsic"`.
             degrees: return degrees.
             suppress_warnings: accepted for scipy compatibility (no gimbal-lock warning).
 
         Returns:
-            Angles in scipy's ranges (see :func:`quaternion_to_davenport`).
+            `(..., 3)` angles in scipy's ranges (see
+                [`quaternion_to_davenport`][rotjax.quaternion_to_davenport]).
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            axes = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # z, x, z
+            r = Rotation.from_euler("ZXZ", [10.0, 20.0, 30.0], degrees=True)
+            print(r.as_davenport(axes, "intrinsic", degrees=True).round(4))
+            # [10. 20. 30.]
+            ```
         """
         del suppress_warnings
         extrinsic = parse_order(order)
@@ -662,8 +938,25 @@ class Rotation:
 
     # --- algebra -------------------------------------------------------------------------
 
-    def __mul__(self, other):
-        """Composition ``self * other``: ``other`` applied first; batch shapes broadcast."""
+    def __mul__(self, other: Rotation) -> Rotation:
+        """Composition `self * other`: `other` applied first; batch shapes broadcast.
+
+        Args:
+            other: the rotation(s) applied first.
+
+        Returns:
+            The composed rotation(s).
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            x90 = Rotation.from_euler("x", 90.0, degrees=True)
+            z90 = Rotation.from_euler("z", 90.0, degrees=True)
+            print((z90 * x90).apply([0.0, 1.0, 0.0]).round(6))  # y -> z, then z stays
+            # [-0.  0.  1.]
+            ```
+        """
         if not isinstance(other, Rotation):
             return NotImplemented
         # The shapes are checked here, so that the error is scipy's ValueError.
@@ -677,12 +970,27 @@ class Rotation:
             ) from None
         return Rotation._raw(_compose(self._stored, other._stored))
 
-    def __pow__(self, n, modulus=None) -> Rotation:
-        """Fractional power: ``n`` times the rotation angle about the same axis.
+    def __pow__(self, n: ArrayLike, modulus: None = None) -> Rotation:
+        """Fractional power: `n` times the rotation angle about the same axis.
 
-        ``n`` is a scalar (an array of shape ``()`` or ``(1,)``); see :func:`quaternion_power`.
-        ``r ** 1`` is ``r`` up to the quaternion's sign (``w >= 0``), ``r ** 0`` the identity
-        exactly.
+        See [`quaternion_power`][rotjax.quaternion_power]. `r ** 1` is `r` up to the
+        quaternion's sign (`w >= 0`), `r ** 0` the identity exactly.
+
+        Args:
+            n: the exponent, a scalar (an array of shape `()` or `(1,)`).
+            modulus: not supported (scipy's signature).
+
+        Returns:
+            The rotation(s) by `n` times the angle.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_euler("z", 90.0, degrees=True)
+            print((r ** 0.5).as_euler("ZYX", degrees=True).round(4))
+            # [45.  0.  0.]
+            ```
         """
         if modulus is not None:
             raise NotImplementedError("modulus not supported")
@@ -695,18 +1003,41 @@ class Rotation:
         return Rotation._raw(quaternion_power(self._quat, e))
 
     def inv(self) -> Rotation:
-        """The inverse rotation(s)."""
+        """The inverse rotation(s).
+
+        Returns:
+            The inverse, of the same shape.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_rotvec([0.1, 0.2, 0.3])
+            print((r * r.inv()).magnitude().round(6))
+            # 0.0
+            ```
+        """
         return Rotation._raw(quaternion_conjugate(self._stored))
 
-    def apply(self, vectors, inverse: bool = False):
-        """Rotate vectors: ``R @ v`` (``R.T @ v`` with ``inverse``).
+    def apply(self, vectors: ArrayLike, inverse: bool = False) -> Array:
+        """Rotate vectors: `R @ v` (`R.T @ v` with `inverse`).
 
         Args:
-            vectors: ``(..., 3)`` vectors; batch shapes broadcast with the rotations'.
+            vectors: `(..., 3)` vectors; batch shapes broadcast with the rotations'.
             inverse: apply the inverse rotation.
 
         Returns:
-            ``(..., 3)`` rotated vectors, in the rotation's dtype.
+            `(..., 3)` rotated vectors, in the rotation's dtype.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_euler("z", 90.0, degrees=True)
+            print(r.apply([1.0, 0.0, 0.0]).round(6),
+                  r.apply([1.0, 0.0, 0.0], inverse=True).round(6))
+            # [-0.  1.  0.] [-0. -1.  0.]
+            ```
         """
         host = _concrete(vectors)
         dtype = self._stored.dtype
@@ -721,20 +1052,47 @@ class Rotation:
             ) from None
         return _apply(self._stored, v, inverse=inverse)
 
-    def magnitude(self):
-        """Rotation angles in ``[0, pi]``, shape ``shape``."""
+    def magnitude(self) -> Array:
+        """Rotation angles in `[0, pi]`.
+
+        Returns:
+            `(...)` angles in radians, of shape `shape`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            print(Rotation.from_rotvec([[0.0, 0.0, 0.5], [3.0, 0.0, 0.0]]).magnitude().round(6))
+            # [0.5 3. ]
+            ```
+        """
         return rotation_angle(self._stored)
 
-    def approx_equal(self, other: Rotation, atol=None, degrees: bool = False):
-        """Whether the angle between the rotations is below ``atol``.
+    def approx_equal(
+        self, other: Rotation, atol: ArrayLike | None = None, degrees: bool = False
+    ) -> Array:
+        """Whether the angle between the rotations is below `atol`.
 
         Args:
-            other: rotations whose batch shape broadcasts with ``shape``.
-            atol: the angle (radians, or degrees with ``degrees``). Default: scipy's 1e-8 rad
+            other: rotations whose batch shape broadcasts with `shape`.
+            atol: the angle (radians, or degrees with `degrees`). Default: scipy's 1e-8 rad
                 in float64, scaled with the square root of the machine epsilon in lower
-                precision (``1e-8 * sqrt(eps / eps_float64)``: about 2.3e-4 rad in float32),
+                precision (`1e-8 * sqrt(eps / eps_float64)`: about 2.3e-4 rad in float32),
                 so that a rotation compares equal to itself and to its round trips.
-            degrees: ``atol`` is in degrees.
+            degrees: `atol` is in degrees.
+
+        Returns:
+            `(...)` booleans, one per rotation pair.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_euler("z", 90.0, degrees=True)
+            s = Rotation.from_euler("z", 90.5, degrees=True)
+            print(r.approx_equal(s, atol=1.0, degrees=True), r.approx_equal(s))
+            # True False
+            ```
         """
         if atol is None:
             dt = jnp.result_type(self._stored.dtype, other._stored.dtype)
@@ -754,12 +1112,27 @@ class Rotation:
         )
         return angle_between(p, q) < atol
 
-    def mean(self, weights=None, axis=None) -> Rotation:
-        """Weighted mean rotation (Markley et al. 2007; :func:`quaternion_mean`).
+    def mean(
+        self, weights: ArrayLike | None = None, axis: int | tuple[int, ...] | None = None
+    ) -> Rotation:
+        """Weighted mean rotation (Markley et al. 2007;
+        [`quaternion_mean`][rotjax.quaternion_mean]).
 
         Args:
-            weights: non-negative weights broadcastable to ``shape``; ``None`` for ones.
-            axis: batch axis or axes to reduce; ``None`` for all.
+            weights: non-negative weights broadcastable to `shape`; `None` for ones.
+            axis: batch axis or axes to reduce; `None` for all.
+
+        Returns:
+            The mean rotation(s), with the reduced axes removed.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            r = Rotation.from_euler("z", [[10.0], [20.0], [30.0]], degrees=True)
+            print(r.mean().as_euler("ZYX", degrees=True).round(2))
+            # [20.  0.  0.]
+            ```
         """
         q = jnp.atleast_2d(self._quat)
         nb = q.ndim - 1
@@ -792,15 +1165,35 @@ class Rotation:
         qt = jnp.reshape(qt, [q.shape[i] for i in keep] + [-1, 4])
         return Rotation._raw(quaternion_mean(qt, w))
 
-    def reduce(self, left=None, right=None, return_indices: bool = False):
-        """Reduce by groups: ``l * self * r`` with the smallest angle (see
-        :func:`quaternion_reduce`).
+    def reduce(
+        self,
+        left: Rotation | None = None,
+        right: Rotation | None = None,
+        return_indices: bool = False,
+    ) -> Rotation | tuple[Rotation, Array | None, Array | None]:
+        """Reduce by groups: `l * self * r` with the smallest angle.
+
+        See [`quaternion_reduce`][rotjax.quaternion_reduce].
 
         Args:
-            left: a ``Rotation`` holding the left group, or ``None``.
-            right: a ``Rotation`` holding the right group, or ``None``.
-            return_indices: also return the indices of the chosen ``l`` and ``r`` (``None``
+            left: a `Rotation` holding the left group, or `None`.
+            right: a `Rotation` holding the right group, or `None`.
+            return_indices: also return the indices of the chosen `l` and `r` (`None`
                 for an absent group).
+
+        Returns:
+            The reduced rotation(s); with `return_indices`, the tuple `(reduced, left_index,
+                right_index)` with `(...)` integer indices or `None`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation
+
+            group = Rotation.create_group("C4")  # quarter turns about z
+            r = Rotation.from_euler("z", 100.0, degrees=True)
+            print(r.reduce(left=group).magnitude().round(6))  # 10 deg, in radians
+            # 0.174533
+            ```
         """
         if left is None and right is None:
             reduced, li, ri = self, None, None
@@ -818,7 +1211,7 @@ class Rotation:
 
 @jax.jit
 def _align(a, b, w):
-    """``align_vectors`` with scipy's infinite-weight rule; ``(N, 3)``, ``(N, 3)``, ``(N,)``."""
+    """`align_vectors` with scipy's infinite-weight rule; `(N, 3)`, `(N, 3)`, `(N,)`."""
     n = a.shape[0]
     inf = jnp.isinf(w) | (n == 1)
     bad = (jnp.sum(jnp.isinf(w)) > 1) | jnp.any(w < 0)
@@ -861,7 +1254,7 @@ def _align(a, b, w):
 
 
 def _keyframe_times(times, rotations, dim_msg, order_msg):
-    """Keyframe times as a 1-D array matching ``rotations`` (scipy's checks and messages)."""
+    """Keyframe times as a 1-D array matching `rotations` (scipy's checks and messages)."""
     if rotations._stored.ndim > 2:
         raise ValueError("Rotations with more than 1 leading dimension are not supported.")
     t = _float(times, rotations._stored.dtype)
@@ -883,17 +1276,27 @@ class Slerp:
     """Spherical linear interpolation between keyframe rotations (scipy's and jax.scipy's).
 
     Between consecutive keyframes the rotation turns at constant angular rate about a fixed
-    axis: ``r_i * exp(alpha * log(r_i^-1 r_(i+1)))``. A pytree (``times``, ``timedelta``,
-    ``rotations``, ``rotvecs``), so it can be built and called under ``jit``.
+    axis: `r_i * exp(alpha * log(r_i^-1 r_(i+1)))`. A pytree (`times`, `timedelta`,
+    `rotations`, `rotvecs`), so it can be built and called under `jit`.
 
     Args:
-        times: ``(N,)`` strictly increasing keyframe times, ``N >= 2``.
-        rotations: a ``Rotation`` of shape ``(N,)``.
+        times: `(N,)` strictly increasing keyframe times, `N >= 2`.
+        rotations: a `Rotation` of shape `(N,)`.
+
+    Examples:
+        ```python
+        from rotjax import Rotation, Slerp
+
+        keys = Rotation.from_euler("z", [[0.0], [90.0], [180.0]], degrees=True)
+        slerp = Slerp([0.0, 1.0, 3.0], keys)
+        print(slerp([0.5, 2.0]).as_euler("ZYX", degrees=True)[:, 0].round(4))
+        # [ 45. 135.]
+        ```
     """
 
     __slots__ = ("times", "timedelta", "rotations", "rotvecs")
 
-    def __init__(self, times, rotations: Rotation):
+    def __init__(self, times: ArrayLike, rotations: Rotation):
         if not isinstance(rotations, Rotation):
             raise TypeError("`rotations` must be a `Rotation` instance.")
         if rotations.single or len(rotations) == 1:
@@ -911,8 +1314,25 @@ class Slerp:
         self.rotvecs = (rotations[:-1].inv() * rotations[1:]).as_rotvec()
 
     @classmethod
-    def init(cls, times, rotations: Rotation) -> Slerp:
-        """jax.scipy's constructor: the same as ``Slerp(times, rotations)``."""
+    def init(cls, times: ArrayLike, rotations: Rotation) -> Slerp:
+        """jax.scipy's constructor: the same as `Slerp(times, rotations)`.
+
+        Args:
+            times: `(N,)` strictly increasing keyframe times, `N >= 2`.
+            rotations: a `Rotation` of shape `(N,)`.
+
+        Returns:
+            The interpolator.
+
+        Examples:
+            ```python
+            from rotjax import Rotation, Slerp
+
+            slerp = Slerp.init([0.0, 1.0], Rotation.from_rotvec([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
+            print(slerp(0.25).as_rotvec().round(6))
+            # [0.   0.   0.25]
+            ```
+        """
         return cls(times, rotations)
 
     def tree_flatten(self):
@@ -924,10 +1344,25 @@ class Slerp:
         s.times, s.timedelta, s.rotations, s.rotvecs = children
         return s
 
-    def __call__(self, times) -> Rotation:
-        """Interpolated rotations at ``times`` (scalar: a single rotation; ``(...)``: that
-        batch shape). Times outside ``[times[0], times[-1]]`` give NaN (ValueError for NumPy
-        input)."""
+    def __call__(self, times: ArrayLike) -> Rotation:
+        """Interpolated rotations at `times`.
+
+        Args:
+            times: scalar (a single rotation) or `(M,)` times within `[times[0], times[-1]]`;
+                outside, the result is NaN (ValueError for NumPy input).
+
+        Returns:
+            The interpolated rotation(s), single or of batch shape `(M,)`.
+
+        Examples:
+            ```python
+            from rotjax import Rotation, Slerp
+
+            slerp = Slerp([0.0, 2.0], Rotation.from_rotvec([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
+            print(slerp([0.0, 1.0, 2.0]).as_rotvec()[:, 2].round(6))
+            # [0.  0.5 1. ]
+            ```
+        """
         t = _float(times, self.times.dtype)
         if t.ndim > 1:
             raise ValueError("`times` must be at most 1-dimensional.")
@@ -971,18 +1406,18 @@ def _slerp_eval(times, timedelta, quat, rotvecs, t):
 
 
 def _body_rate(phi, phi_dot):
-    """Body angular velocity of ``exp(phi)`` moving at ``phi_dot``."""
+    """Body angular velocity of `exp(phi)` moving at `phi_dot`."""
     q, dq = jax.jvp(rotvec_to_quaternion, (phi,), (phi_dot,))
     return quaternion_derivative_to_angular_velocity(q, dq, frame="body")
 
 
 def _rate_jacobian(phi):
-    """``B(phi)``: ``body_rate = B(phi) @ phi_dot``; ``(3,)`` to ``(3, 3)``."""
+    """`B(phi)`: `body_rate = B(phi) @ phi_dot`; `(3,)` to `(3, 3)`."""
     return jax.jacfwd(lambda v: _body_rate(phi, v))(jnp.zeros_like(phi))
 
 
 def _quadratic_term(phi, phi_dot):
-    """``N(phi, phi_dot)``: the angular acceleration's term quadratic in ``phi_dot``."""
+    """`N(phi, phi_dot)`: the angular acceleration's term quadratic in `phi_dot`."""
     return jax.jvp(lambda p: _body_rate(p, phi_dot), (phi,), (phi_dot,))[1]
 
 
@@ -1041,16 +1476,26 @@ class RotationSpline:
     keyframe, with the angular rates at the knots chosen to make the angular acceleration
     continuous (Sec. 4 of the scipy reference; the end rates are those of the end chords).
     Construction and evaluation are jittable (a fixed number of fixed-point iterations and a
-    dense linear solve of size ``3 (N - 2)``). A pytree.
+    dense linear solve of size `3 (N - 2)`). A pytree.
 
     Args:
-        times: ``(N,)`` strictly increasing times, ``N >= 2``.
-        rotations: a ``Rotation`` of shape ``(N,)``.
+        times: `(N,)` strictly increasing times, `N >= 2`.
+        rotations: a `Rotation` of shape `(N,)`.
+
+    Examples:
+        ```python
+        from rotjax import Rotation, RotationSpline
+
+        keys = Rotation.from_euler("z", [[0.0], [30.0], [90.0], [180.0]], degrees=True)
+        spline = RotationSpline([0.0, 1.0, 2.0, 3.0], keys)
+        print(spline([1.0, 1.5]).as_euler("ZYX", degrees=True)[:, 0].round(2))
+        # [30. 55.]
+        ```
     """
 
     __slots__ = ("times", "rotations", "_coeffs")
 
-    def __init__(self, times, rotations: Rotation):
+    def __init__(self, times: ArrayLike, rotations: Rotation):
         if not isinstance(rotations, Rotation) or rotations.single:
             raise ValueError("`rotations` must be a sequence of rotations.")
         if len(rotations) == 1:
@@ -1074,17 +1519,27 @@ class RotationSpline:
         s.times, s.rotations, s._coeffs = children
         return s
 
-    def __call__(self, times, order: int = 0):
-        """Rotations (``order=0``), angular rates (1, rad/s) or angular accelerations (2).
+    def __call__(self, times: ArrayLike, order: int = 0) -> Rotation | Array:
+        """Rotations (`order=0`), angular rates (1, rad/s) or angular accelerations (2).
 
         Args:
-            times: scalar or ``(M,)`` times; outside the knots the end cubics extrapolate.
+            times: scalar or `(M,)` times; outside the knots the end cubics extrapolate.
             order: 0, 1 or 2.
 
         Returns:
-            A ``Rotation``, or ``(..., 3)`` rates/accelerations: the angular velocity of
-            ``R(t)`` expressed in the frame of the keyframe ``R_i`` that starts the segment
-            (scipy's convention), and its time derivative.
+            A `Rotation` for `order=0`; else `(..., 3)` angular rates or accelerations: the
+                angular velocity of `R(t)` expressed in the frame of the keyframe `R_i` that
+                starts the segment (scipy's convention), and its time derivative.
+
+        Examples:
+            ```python
+            from rotjax import Rotation, RotationSpline
+
+            keys = Rotation.from_euler("z", [[0.0], [90.0], [180.0]], degrees=True)
+            spline = RotationSpline([0.0, 1.0, 2.0], keys)  # a steady 90 deg per unit time
+            print(spline(0.5, order=1).round(4))
+            # [0.     0.     1.5708]
+            ```
         """
         if order not in (0, 1, 2):
             raise ValueError("`order` must be 0, 1 or 2.")

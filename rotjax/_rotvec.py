@@ -5,6 +5,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._matrix import _from_matrix
 from ._numerics import (
@@ -31,7 +33,7 @@ def _small(x2):
 
 
 def _exp_coeffs(theta2):
-    """``sin(t/2)/t`` and ``cos(t/2)`` for ``t = sqrt(theta2)``, smooth at 0 (double where)."""
+    """`sin(t/2)/t` and `cos(t/2)` for `t = sqrt(theta2)`, smooth at 0 (double where)."""
     small = _small(theta2)
     t = jnp.sqrt(jnp.where(small, 1.0, theta2))  # any non-zero value keeps the gradient finite
     k = jnp.where(small, 0.5 - theta2 / 48 + theta2 * theta2 / 3840, jnp.sin(t / 2) / t)
@@ -91,22 +93,35 @@ def _quat_to_rotvec(q):
 
 
 @public
-def rotvec_to_quaternion(rotvec, degrees: bool = False, scalar_first: bool = False):
-    """Exponential map: rotation vector ``theta * axis`` to a unit quaternion.
+def rotvec_to_quaternion(
+    rotvec: ArrayLike, degrees: bool = False, scalar_first: bool = False
+) -> Array:
+    """Exponential map: rotation vector `theta * axis` to a unit quaternion.
 
     Args:
-        rotvec: ``(..., 3)`` rotation vector; its norm is the angle (any size) and its direction
+        rotvec: `(..., 3)` rotation vector; its norm is the angle (any size) and its direction
             the axis (right-hand rule).
-        degrees: the norm of ``rotvec`` is in degrees.
-        scalar_first: return ``(w, x, y, z)``.
+        degrees: the norm of `rotvec` is in degrees.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion ``(sin(t/2) axis, cos(t/2))``. ``w`` is negative for angles
-        above pi; no hemisphere is imposed, so the map is smooth everywhere.
+        `(..., 4)` unit quaternion `(sin(t/2) axis, cos(t/2))`. `w` is negative for angles
+            above pi; no hemisphere is imposed, so the map is smooth everywhere.
 
     Note:
         Smooth at the zero vector, where a Taylor branch (double where) gives the exact
-        derivative ``d q_v / d rotvec = I / 2``.
+        derivative `d q_v / d rotvec = I / 2`.
+
+    Examples:
+        ```python
+        import jax.numpy as jnp
+        import rotjax as rj
+
+        print(rj.rotvec_to_quaternion([0.0, 0.0, jnp.pi / 2]).round(6))  # 90 deg about z
+        # [0.       0.       0.707107 0.707107]
+        print(rj.rotvec_to_quaternion([0.0, 0.0, 90.0], degrees=True, scalar_first=True).round(6))
+        # [0.707107 0.       0.       0.707107]
+        ```
     """
     (v,), dt = as_float(rotvec)
     check_shape(v, (3,), "rotvec")
@@ -116,22 +131,32 @@ def rotvec_to_quaternion(rotvec, degrees: bool = False, scalar_first: bool = Fal
 
 
 @public
-def quaternion_to_rotvec(q, degrees: bool = False, scalar_first: bool = False):
-    """Logarithm map: unit quaternion to the rotation vector of angle in ``[0, pi]``.
+def quaternion_to_rotvec(q: ArrayLike, degrees: bool = False, scalar_first: bool = False) -> Array:
+    """Logarithm map: unit quaternion to the rotation vector of angle in `[0, pi]`.
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit (zero gives NaN).
+        q: `(..., 4)` quaternion; need not be unit (zero gives NaN).
         degrees: return the vector with its norm in degrees.
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(..., 3)`` rotation vector with norm in ``[0, pi]`` (or ``[0, 180]``).
+        `(..., 3)` rotation vector with norm in `[0, pi]` (or `[0, 180]`).
 
     Note:
-        Uses ``2 atan2(|q_v|, |w|) / |q_v|`` with a Taylor branch near the identity, so the
-        derivative there is exact: ``d rotvec / d q_v = 2 I`` for a unit ``q``. At exactly
-        180 degrees both ``v`` and ``-v`` are valid; the one from the sign of ``q_v`` after
-        choosing ``w >= 0`` is returned, and the map jumps there (it must: the log has a cut).
+        Uses `2 atan2(|q_v|, |w|) / |q_v|` with a Taylor branch near the identity, so the
+        derivative there is exact: `d rotvec / d q_v = 2 I` for a unit `q`. At exactly
+        180 degrees both `v` and `-v` are valid; the one from the sign of `q_v` after
+        choosing `w >= 0` is returned, and the map jumps there (it must: the log has a cut).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.quaternion_to_rotvec([0.0, 0.0, 0.70710678, 0.70710678], degrees=True))
+        # [ 0.  0. 90.]
+        print(rj.quaternion_to_rotvec([0.0, 0.0, 0.0, 1.0]))  # identity: exactly zero
+        # [0. 0. 0.]
+        ```
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
@@ -142,20 +167,30 @@ def quaternion_to_rotvec(q, degrees: bool = False, scalar_first: bool = False):
 
 
 @public
-def rotvec_to_matrix(rotvec, degrees: bool = False):
+def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
     """Rodrigues formula: rotation vector to an active rotation matrix.
 
     Args:
-        rotvec: ``(..., 3)`` rotation vector (angle = norm, any size).
+        rotvec: `(..., 3)` rotation vector (angle = norm, any size).
         degrees: the norm is in degrees.
 
     Returns:
-        ``(..., 3, 3)`` rotation matrix ``I + sin(t)/t K + (1 - cos t)/t^2 K^2`` with
-        ``K = hat(rotvec)``.
+        `(..., 3, 3)` rotation matrix `I + sin(t)/t K + (1 - cos t)/t^2 K^2` with
+            `K = hat(rotvec)`.
 
     Note:
-        ``(1 - cos t)`` is evaluated as ``2 sin^2(t/2)`` (no cancellation), and both coefficients
+        `(1 - cos t)` is evaluated as `2 sin^2(t/2)` (no cancellation), and both coefficients
         have Taylor branches at 0, so values and gradients are exact at the zero vector.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.rotvec_to_matrix([90.0, 0.0, 0.0], degrees=True).round(6))
+        # [[ 1.  0.  0.]
+        #  [ 0. -0. -1.]
+        #  [ 0.  1. -0.]]
+        ```
     """
     (v,), dt = as_float(rotvec)
     check_shape(v, (3,), "rotvec")
@@ -171,21 +206,31 @@ def rotvec_to_matrix(rotvec, degrees: bool = False):
 
 
 @public
-def matrix_to_rotvec(R, degrees: bool = False):
+def matrix_to_rotvec(R: ArrayLike, degrees: bool = False) -> Array:
     """Logarithm of a rotation matrix, via the branch-free quaternion extraction.
 
     Args:
-        R: ``(..., 3, 3)`` active rotation matrix.
+        R: `(..., 3, 3)` active rotation matrix.
         degrees: return the norm in degrees.
 
     Returns:
-        ``(..., 3)`` rotation vector with norm in ``[0, pi]``.
+        `(..., 3)` rotation vector with norm in `[0, pi]`.
 
     Note:
-        Going through :func:`matrix_to_quaternion` keeps full accuracy at 180 degrees, where
-        ``acos((trace - 1) / 2)`` formulas lose half the digits and the axis from the
-        antisymmetric part vanishes. Scale invariant and NaN for non-rotations like it, and the
-        gradient is the derivative of the function computed, off SO(3) too.
+        Going through [`matrix_to_quaternion`][rotjax.matrix_to_quaternion] keeps full
+        accuracy at 180 degrees, where `acos((trace - 1) / 2)` formulas lose half the digits
+        and the axis from the antisymmetric part vanishes. Scale invariant and NaN for
+        non-rotations like it, and the gradient is the derivative of the function computed,
+        off SO(3) too.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        R = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # 90 deg about z
+        print(rj.matrix_to_rotvec(R, degrees=True))
+        # [ 0.  0. 90.]
+        ```
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
@@ -196,17 +241,27 @@ def matrix_to_rotvec(R, degrees: bool = False):
 
 
 @public
-def axis_angle_to_quaternion(axis, angle, degrees: bool = False, scalar_first: bool = False):
-    """Quaternion of a rotation by ``angle`` about ``axis``.
+def axis_angle_to_quaternion(
+    axis: ArrayLike, angle: ArrayLike, degrees: bool = False, scalar_first: bool = False
+) -> Array:
+    """Quaternion of a rotation by `angle` about `axis`.
 
     Args:
-        axis: ``(..., 3)`` rotation axis; need not be unit (the zero axis gives NaN).
-        angle: ``(...)`` angle (right-hand rule); broadcasts against ``axis[..., 0]``.
-        degrees: ``angle`` is in degrees.
-        scalar_first: return ``(w, x, y, z)``.
+        axis: `(..., 3)` rotation axis; need not be unit (the zero axis gives NaN).
+        angle: `(...)` angle (right-hand rule); broadcasts against `axis[..., 0]`.
+        degrees: `angle` is in degrees.
+        scalar_first: return `(w, x, y, z)`.
 
     Returns:
-        ``(..., 4)`` unit quaternion ``(sin(angle/2) n, cos(angle/2))``, ``n = axis / |axis|``.
+        `(..., 4)` unit quaternion `(sin(angle/2) n, cos(angle/2))`, `n = axis / |axis|`.
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        print(rj.axis_angle_to_quaternion([0.0, 0.0, 2.0], 90.0, degrees=True).round(6))
+        # [0.       0.       0.707107 0.707107]
+        ```
     """
     (axis, angle), dt = as_float(axis, angle)
     check_shape(axis, (3,), "axis")
@@ -220,23 +275,35 @@ def axis_angle_to_quaternion(axis, angle, degrees: bool = False, scalar_first: b
 
 
 @public
-def quaternion_to_axis_angle(q, degrees: bool = False, scalar_first: bool = False):
-    """Axis and angle of a quaternion, with the angle in ``[0, pi]``.
+def quaternion_to_axis_angle(
+    q: ArrayLike, degrees: bool = False, scalar_first: bool = False
+) -> tuple[Array, Array]:
+    """Axis and angle of a quaternion, with the angle in `[0, pi]`.
 
     Args:
-        q: ``(..., 4)`` quaternion; need not be unit (zero gives NaN).
+        q: `(..., 4)` quaternion; need not be unit (zero gives NaN).
         degrees: return the angle in degrees.
-        scalar_first: ``q`` is ``(w, x, y, z)``.
+        scalar_first: `q` is `(w, x, y, z)`.
 
     Returns:
-        ``(axis, angle)``: ``(..., 3)`` unit axis and ``(...)`` angle in ``[0, pi]``.
+        axis: `(..., 3)` unit axis.
+        angle: `(...)` angle in `[0, pi]` (or `[0, 180]` with `degrees`).
 
     Note:
-        At the identity the axis is undefined; ``(1, 0, 0)`` is returned, with a zero gradient
-        (finite, by the double where). A tiny but non-zero vector part (``1e-160`` next to
-        ``w = 1``) gives its own direction: it is scaled by a power of two before its norm is
-        taken. Any finite non-zero scale of ``q`` gives the same result. The angle uses atan2
-        (see :func:`rotation_angle`).
+        At the identity the axis is undefined; `(1, 0, 0)` is returned, with a zero gradient
+        (finite, by the double where). A tiny but non-zero vector part (`1e-160` next to
+        `w = 1`) gives its own direction: it is scaled by a power of two before its norm is
+        taken. Any finite non-zero scale of `q` gives the same result. The angle uses atan2
+        (see [`rotation_angle`][rotjax.rotation_angle]).
+
+    Examples:
+        ```python
+        import rotjax as rj
+
+        axis, angle = rj.quaternion_to_axis_angle([0.0, 0.0, -1.0, 1.0], degrees=True)
+        print(axis, angle)
+        # [ 0.  0. -1.] 90.0
+        ```
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")

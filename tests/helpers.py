@@ -12,6 +12,10 @@ import rotjax as rj
 LETTER_SEQS = [a + b + c for a in "xyz" for b in "xyz" for c in "xyz" if a != b and b != c]
 SEQS = LETTER_SEQS + [s.upper() for s in LETTER_SEQS]  # 12 extrinsic + 12 intrinsic
 DIGIT_SEQS = ["313", "123", "121", "232", "321"]
+# The sequences that a sweep over all of SEQS keeps in the default run; conftest.py marks the
+# others slow. Tait-Bryan and proper, each first axis, intrinsic and extrinsic, cyclic and
+# anticyclic axis orders, and a digit form.
+FAST_SEQS = ["ZYX", "xyz", "YZX", "zxz", "XZX", "yxy", "313"]
 BATCH_SHAPES = [(), (1,), (3, 1, 2, 1)]
 DTYPES = [np.float32, np.float64]
 

@@ -207,17 +207,17 @@ def test_tiny_vector_part_gives_its_axis_and_angle():
         assert_close(rj.quaternion_to_rotvec(q) / t, [0.0, 1.2, -1.6], atol=8 * np.finfo(dtype).eps)
 
 
-def test_euler_angles_keep_a_small_rotation_next_to_a_tiny_factor():
+@pytest.mark.parametrize("seq", SEQS)
+def test_euler_angles_keep_a_small_rotation_next_to_a_tiny_factor(seq):
     """Just off gimbal lock, a factor C of 2e-303 (float64) or 1e-36 (float32) next to a turn of
     2e-7 (2e-3) about the locked axis in A: a product of that small component of A with C
     underflows unless each factor is scaled by its own power of two, and the turn was lost."""
     for dtype, small, delta in ((np.float64, 1e-7, 2e-303), (np.float32, 1e-3, 1e-36)):
-        for seq in SEQS:
-            pat = _abcd_patterns(seq)  # abcd = pat @ q
-            q = (pat.T @ np.array([1.0, small, delta, 0.0]) / (pat[0] @ pat[0])).astype(dtype)
-            back = rj.euler_to_matrix(rj.quaternion_to_euler(q, seq), seq)
-            want = rj.quaternion_to_matrix(q)
-            assert_close(back, want, atol=8 * np.finfo(dtype).eps, err_msg=f"{dtype} {seq}")
+        pat = _abcd_patterns(seq)  # abcd = pat @ q
+        q = (pat.T @ np.array([1.0, small, delta, 0.0]) / (pat[0] @ pat[0])).astype(dtype)
+        back = rj.euler_to_matrix(rj.quaternion_to_euler(q, seq), seq)
+        want = rj.quaternion_to_matrix(q)
+        assert_close(back, want, atol=8 * np.finfo(dtype).eps, err_msg=f"{dtype} {seq}")
 
 
 # --- gradients at every distance from gimbal lock ---------------------------------------------
