@@ -82,8 +82,13 @@ def public_objects():
 
     package = griffe.load("rotjax", search_paths=["."], docstring_parser="google")
     for name in _all_names():
-        obj = package[name].final_target
-        if obj.is_class:
+        obj = package[name]
+        obj = obj if obj.is_module else obj.final_target
+        if obj.is_module:  # a public submodule (rotjax.manifold): its own public functions
+            for member_name, member in obj.members.items():
+                if not member_name.startswith("_") and member.is_function:
+                    yield f"rotjax.{name}.{member_name}", member, "function"
+        elif obj.is_class:
             yield f"rotjax.{name}", obj, "class"
             for member_name, member in obj.members.items():
                 if member.is_alias or not member.docstring:

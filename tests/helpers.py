@@ -217,6 +217,15 @@ def every_public(q, r, w, a):
         "se3_right_jacobian": (rj.se3_right_jacobian, (xi,)),
         "se3_left_jacobian_inverse": (rj.se3_left_jacobian_inverse, (xi,)),
         "se3_right_jacobian_inverse": (rj.se3_right_jacobian_inverse, (xi,)),
+        "RigidTransform": (
+            lambda xi: rj.RigidTransform.from_exp_coords(xi).apply(xi[..., 3:]),
+            (xi,),
+        ),
+        # dual quaternions [real, dual], the dual part not orthogonal to the real one
+        "normalize_dual_quaternion": (
+            lambda q: rj.normalize_dual_quaternion(jnp.concatenate([q, q[..., ::-1]], axis=-1)),
+            (q,),
+        ),
         "Rotation": (lambda q: rj.Rotation.from_quat(q).as_euler("XYZ"), (q,)),
         "Slerp": (
             lambda q: rj.Slerp(np.arange(8, dtype=q.dtype), rj.Rotation.from_quat(q[:8]))(
