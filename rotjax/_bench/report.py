@@ -354,7 +354,7 @@ def headline(meta, rows) -> str:
         "to each peer. " + SPEED_RATIO_NOTE,
         "",
         *_md_table(
-            ["conversion", "dtype", "rotjax Mrot/s", *(SPEED_RATIO.format(p) for p in labels)],
+            ["conversion", "dtype", "rotjax Mrot/s", *(f"rotjax ÷ {p}" for p in labels)],
             align,
             speed,
         ),
