@@ -338,35 +338,35 @@ def headline(meta, rows) -> str:
     peers = [p for p in PEERS if any(k[2] == p for k in by)]
     keys = [(op, dt) for op in HEADLINE_OPS for dt in ("float32", "float64")]
     keys = [k for k in keys if (*k, "rotjax") in by]
-    speed, acc = [], []
-    for op, dt in keys:
-        own = by[(op, dt, "rotjax")]
-        others = [by.get((op, dt, p)) for p in peers]
-        speed.append(
-            [op, dt, _num(own["mrot_s"])]
-            + [f"{_num(speedup(r))}x" if r and speedup(r) else "-" for r in others]
-        )
-        acc.append([op, dt, _eps(own)] + [_eps(r) if r else "-" for r in others])
-    align = "ll" + "r" * (1 + len(peers))
+    align = "l" + "r" * (1 + len(peers))
     labels = [PEER_LABELS.get(p, p) for p in peers]
     out = [
         "Speed: rotjax's throughput in millions of rotations per second, and the speed ratio "
         "to each peer. " + SPEED_RATIO_NOTE,
         "",
-        *_md_table(
-            ["conversion", "dtype", "rotjax Mrot/s", *(SPEED_RATIO.format(p) for p in labels)],
-            align,
-            speed,
-        ),
-        "",
-        caption(meta, sorted({op for op, _ in keys}, key=HEADLINE_OPS.index)),
-        "",
+    ]
+    acc_out = [
         "Accuracy: the largest error over the adversarial sets, in eps of the dtype (lower is "
         "better; NaN: some output was NaN).",
         "",
-        *_md_table(["conversion", "dtype", "rotjax", *labels], align, acc),
-        "",
     ]
+    for dt in ("float32", "float64"):
+        speed, acc = [], []
+        for op, _ in [k for k in keys if k[1] == dt]:
+            own = by[(op, dt, "rotjax")]
+            others = [by.get((op, dt, p)) for p in peers]
+            speed.append(
+                [op, _num(own["mrot_s"])]
+                + [f"{_num(speedup(r))}x" if r and speedup(r) else "-" for r in others]
+            )
+            acc.append([op, _eps(own)] + [_eps(r) if r else "-" for r in others])
+        if not speed:
+            continue
+        head = [f"{dt} conversion", "rotjax Mrot/s", *(f"rotjax ÷ {p}" for p in labels)]
+        out += [*_md_table(head, align, speed), ""]
+        acc_out += [*_md_table([f"{dt} conversion", "rotjax", *labels], align, acc), ""]
+    out += [caption(meta, sorted({op for op, _ in keys}, key=HEADLINE_OPS.index)), ""]
+    out += acc_out
     return "\n".join(out)
 
 
