@@ -86,7 +86,7 @@ def public_objects():
         obj = obj if obj.is_module else obj.final_target
         if obj.is_module:  # a public submodule (rotjax.manifold): its own public functions
             for member_name, member in obj.members.items():
-                if not member_name.startswith("_") and member.is_function:
+                if not member_name.startswith("_") and not member.is_alias and member.is_function:
                     yield f"rotjax.{name}.{member_name}", member, "function"
         elif obj.is_class:
             yield f"rotjax.{name}", obj, "class"

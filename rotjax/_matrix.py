@@ -24,26 +24,34 @@ from ._shepperd import entries, k4_columns, masks, select, select_column, stack_
 METHODS = ("shepperd", "markley", "optimal")
 
 
-def _prescaled(R):
+def _prescaled(R, split=False):
     """The nine entries of ``R`` (row by row) times a power of two ``s`` that brings the largest
     into ``[0.5, 2)`` (exact; 1 for a rotation matrix), so that no product below overflows or
     underflows; their squared Frobenius norm; whether ``R`` is a candidate rotation (not zero,
     every entry finite); and ``s``. Per-rotation scalars: XLA:CPU applies the scale inside the
-    one loop that reads ``R`` (a scaled copy of ``R`` would be a loop of its own)."""
-    r = entries(R)
+    one loop that reads ``R`` (a scaled copy of ``R`` would be a loop of its own).
+
+    ``split``: read the entries with one ``jnp.split`` instead of nine slices, for code that JAX
+    differentiates itself (``"markley"``): the transpose of nine slices is nine pads of the
+    whole cotangent, which XLA:CPU evaluated at every entry (seconds per call at 2^14)."""
+    r = (
+        entries(R)
+        if not split
+        else [x[..., 0] for x in jnp.split(R.reshape(*R.shape[:-2], 9), 9, -1)]
+    )
     s = unit_scale(max_abs(*r))
     r = [x * s for x in r]
     f2 = sum(x * x for x in r)
     return r, f2, (f2 > 0) & (f2 < jnp.inf), s
 
 
-def _scaled_k(R):
+def _scaled_k(R, split=False):
     """The columns of the homogeneous ``K`` (see :func:`rotjax._shepperd.k4_columns`) of the
     prescaled ``R``, with ``t = |R|_F / sqrt(3)`` (1 for a rotation matrix, ``s`` for ``s``
     times one), and the ``d`` terms. ``t`` is NaN for a zero or non-finite ``R``, and so is
     every column :func:`rotjax._shepperd.select_column` returns (the NaN is put into the scale,
     not into a copy of ``R``)."""
-    r, f2, ok, _ = _prescaled(R)
+    r, f2, ok, _ = _prescaled(R, split)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
     return k4_columns(r, jnp.where(ok, h * rsqrt(h), jnp.nan))
 
@@ -142,7 +150,7 @@ def _markley(R):
     expressions throughout, as in `_shepperd` (the Shepperd quaternion is not stacked
     and unstacked in between: that cost a transposing loop).
     """
-    cols, diag = _scaled_k(R)
+    cols, diag = _scaled_k(R, split=True)
     c, sq = select_column(cols, diag)
     s0 = _hemisphere_scale(c, sq)
     v = _k_times(cols, [x * s0 for x in c])
