@@ -95,7 +95,7 @@ BOUNDS = [
         "test_core_oracle.py::test_euler_to_matrix_accuracy_ulp",
     ),
 ]
-PEERS = ["rotjax", "scipy", "jax.scipy", "jaxlie"]
+PEERS = ["rotjax", "scipy", "scipy-jax", "jax.scipy", "jaxlie"]
 BENCH = Path(__file__).resolve().parents[1] / "bench.json"
 
 
