@@ -12,12 +12,12 @@ from ._eigen import nearest_quaternion
 from ._numerics import (
     as_float,
     check_shape,
+    exponent_scale,
     from_scalar_last,
     like_rank,
     max_abs,
     public,
     rsqrt,
-    unit_scale,
 )
 from ._shepperd import entries, k4_columns, masks, select, select_column, stack_last
 
@@ -26,7 +26,7 @@ METHODS = ("shepperd", "markley", "optimal")
 
 def _prescaled(R, split=False):
     """The nine entries of ``R`` (row by row) times a power of two ``s`` that brings the largest
-    into ``[0.5, 2)`` (exact; 1 for a rotation matrix), so that no product below overflows or
+    into ``[1, 2)`` (exact), so that no product below overflows or
     underflows; their squared Frobenius norm; whether ``R`` is a candidate rotation (not zero,
     every entry finite); and ``s``. Per-rotation scalars: XLA:CPU applies the scale inside the
     one loop that reads ``R`` (a scaled copy of ``R`` would be a loop of its own).
@@ -39,7 +39,10 @@ def _prescaled(R, split=False):
         if not split
         else [x[..., 0] for x in jnp.split(R.reshape(*R.shape[:-2], 9), 9, -1)]
     )
-    s = unit_scale(max_abs(*r))
+    # Always the power of two, also for a rotation matrix (s = 1 or 2 there): every step below
+    # is exact under it, and one less select keeps XLA:CPU's per-rotation scale function small
+    # enough to be inlined into the vectorised loop in float64 too.
+    s, _ = exponent_scale(jax.lax.stop_gradient(max_abs(*r)))
     r = [x * s for x in r]
     f2 = sum(x * x for x in r)
     return r, f2, (f2 > 0) & (f2 < jnp.inf), s
@@ -198,10 +201,10 @@ def matrix_to_quaternion(
     Note:
         *Scale.* `K` is built homogeneous (its diagonal `1 = |q|^2` replaced by
         `t = |R|_F / sqrt(3)`, which adds `(t - 1) I` and changes no eigenvector), and
-        `R` is scaled by an exact power of two when its largest entry is outside
-        `[0.5, 2)`: every method gives the same unit quaternion, to a few eps, for `s R`
+        `R` is scaled by the exact power of two that brings its largest entry into `[1, 2)`,
+        which adds no rounding: every method gives the same unit quaternion, to a few eps, for `s R`
         as for `R`, for any `s > 0` from 1e-30 to 1e30 (float32) or 1e-300 to 1e300
-        (float64). A rotation matrix is not rescaled. The zero matrix, or any infinite or NaN
+        (float64). The zero matrix, or any infinite or NaN
         entry, gives NaN (in that batch element only).
 
         *Singular points.* No sqrt or division is applied to a small number: the selected
