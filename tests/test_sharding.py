@@ -49,10 +49,11 @@ SCRIPT = textwrap.dedent(
         def loss(*a):
             return jnp.sum(f(*a) ** 2)
 
-        grad = jax.grad(loss, argnums=tuple(range(len(args))))
+        # gradients jitted whole: one program each, not one per operation of the loss
+        grad = jax.jit(jax.grad(loss, argnums=tuple(range(len(args)))))
         for g, w in zip(grad(*sharded), grad(*args)):
             check(name + " grad", g, w)
-        per = jax.vmap(jax.grad(lambda *a: jnp.sum(f(*a) ** 2), argnums=0))
+        per = jax.jit(jax.vmap(jax.grad(loss, argnums=0)))
         check(name + " vmap(grad)", per(*sharded), per(*args))
         # jit with the sharding as an explicit output constraint: the same values
         jitted = jax.jit(f, out_shardings=NamedSharding(mesh, P("batch")))
