@@ -21,7 +21,7 @@ from ._numerics import (
     select,
     to_scalar_last,
 )
-from ._quaternion import _multiply, _to_matrix
+from ._quaternion import _multiply, _stack, _to_matrix
 
 _VALID = (
     "three axis letters with no two consecutive equal, all uppercase for intrinsic "
@@ -299,19 +299,23 @@ def _substitute(abcd, locks):
 _LAST = np.array([False, False, True])
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
-def _quat_to_euler(q, seq):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
+def _quat_to_euler(q, seq, per_rotation=False):
     """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold.
 
     `q` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
+
+    `per_rotation`: finish every angle on per-rotation arrays and stack them on a leading
+    axis, moved last (the matrix path: with the Shepperd column in front, XLA:CPU then emits
+    one vectorised loop, where the last-axis form gave a scalar one); else stack the three
+    atan2 on the last axis and finish there (the quaternion path: two vectorised loops, which
+    ran several times faster than the one scalar loop of the other form).
     """
     _, (a, b, c, d), _, locks, bad = _factors(*(q[..., n] for n in range(4)), seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
     # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
-    # The three atan2 run on per-rotation arrays and their results are stacked on the last
-    # axis: XLA:CPU compiles the extraction to one loop (two for Tait-Bryan sequences).
     # A factor below 2^-k (k half the exponent range) is multiplied by 2^k (exact; the angles
     # do not change): with only q scaled, the product of a small component of A and one of a
     # tiny C could underflow (b c = 1e-7 * 1e-303) and lose a turn that the others do not carry.
@@ -319,11 +323,16 @@ def _quat_to_euler(q, seq):
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
+    locked = locks[0] | locks[1]
+    # The substitution makes the zeroed (last) angle an atan2 of (x - x, ...), which a fused
+    # multiply-add can leave at a rounding error instead of 0: it is set exactly.
+    if per_rotation:
+        out = [_atan2(num[n], den[n]) * f + s for n, f, s in zip(order, factor, shift, strict=True)]
+        out[2] = jnp.where(locked, 0.0, out[2])
+        return _stack([jnp.where(bad, jnp.nan, x) for x in out])
     ang = jnp.stack([_atan2(num[n], den[n]) for n in order], axis=-1)
     out = ang * like_rank(factor, ang) + like_rank(shift, ang)
-    # The substitution makes the zeroed angle an atan2 of (x - x, ...), which a fused
-    # multiply-add can leave at a rounding error instead of 0: set it exactly.
-    out = jnp.where((locks[0] | locks[1])[..., None] & like_rank(_LAST, out, bool), 0.0, out)
+    out = jnp.where(locked[..., None] & like_rank(_LAST, out, bool), 0.0, out)
     return jnp.where(bad[..., None], jnp.nan, out)
 
 
@@ -411,12 +420,12 @@ def _contract(jac, dx):
 
 
 @_quat_to_euler.defjvp
-def _quat_to_euler_jvp(seq, primals, tangents):
+def _quat_to_euler_jvp(seq, per_rotation, primals, tangents):
     # The exact derivative of the code above (see _euler_jacobian).
     (q,), (dq,) = primals, tangents
     e = [like_rank(v, q) for v in _abcd_patterns(seq)]
     jac = _euler_jacobian([q[..., i] for i in range(4)], seq, 4, lambda _: e)
-    return _quat_to_euler(q, seq), _contract(jac, dq)
+    return _quat_to_euler(q, seq, per_rotation), _contract(jac, dq)
 
 
 def _matrix_to_euler(R, seq):
@@ -425,7 +434,7 @@ def _matrix_to_euler(R, seq):
     # through its diagonal). JAX differentiates it: the derivative is the true one of the
     # function computed, with quaternion_to_euler's rule (its exact derivative) inside.
     c, _ = _selected_column(R)
-    return _quat_to_euler(jnp.stack(c, axis=-1), seq)
+    return _quat_to_euler(jnp.stack(c, axis=-1), seq, True)
 
 
 @public

@@ -66,7 +66,11 @@ def test_documented_bounds_and_round_trips_on_trouble(dtype):
         R = rj.quaternion_to_matrix(q)
         R64 = np.asarray(R, np.float64)
         gram = np.einsum("nji,njk->nik", R64, R64) - np.eye(3)
-        assert np.abs(gram).max() <= 8 * eps and np.abs(np.linalg.det(R64) - 1).max() <= 8 * eps
+        # Entries within 3 eps of the exact matrix (the accuracy sets) move each entry of the
+        # Gram matrix, and the determinant, by at most 2 sqrt(3) 3 eps, plus 2 eps for their
+        # own evaluation here: 12.4 eps (10.8 eps were seen, in 400k quaternions at every scale).
+        bound = (2 * np.sqrt(3) * 3 + 2) * eps
+        assert np.abs(gram).max() <= bound and np.abs(np.linalg.det(R64) - 1).max() <= bound
         for method in ("shepperd", "markley", "optimal"):
             err = _rotation_error(rj.matrix_to_quaternion(R, method=method), unit)
             assert err.max() <= 8 * eps, (method, err.max() / eps, q[err.argmax()])
