@@ -255,7 +255,7 @@ def _defining(x):
 
 
 def test_se3_jacobians_by_their_definitions():
-    got = jax.vmap(_defining)(jnp.asarray(DEF_XIS))
+    got = jax.jit(jax.vmap(_defining))(jnp.asarray(DEF_XIS))
     names = ("right_jacobian", "left_jacobian", "right_jacobian_inverse", "left_jacobian_inverse")
     for name, J in zip(names, got, strict=True):
         want = np.asarray(getattr(rj, "se3_" + name)(DEF_XIS))
@@ -278,7 +278,7 @@ def test_so3_jacobians_by_their_definitions():
         return [jax.jacfwd(f)(z) for f in fs]
 
     p = DEF_XIS[:, :3]
-    got = jax.vmap(defining)(jnp.asarray(p))
+    got = jax.jit(jax.vmap(defining))(jnp.asarray(p))
     names = ("right_jacobian", "left_jacobian", "right_jacobian_inverse", "left_jacobian_inverse")
     for name, J in zip(names, got, strict=True):
         want = np.asarray(getattr(rj, "so3_" + name)(p))
@@ -323,8 +323,9 @@ def test_first_and_second_derivatives_are_finite_at_singular_points(name):
     def total(a):
         return jnp.sum(f(a) * jnp.arange(1.0, 1 + f(a).size).reshape(f(a).shape))
 
-    J = jax.vmap(jax.jacfwd(f))(jnp.asarray(args))
-    H = jax.vmap(jax.hessian(total))(jnp.asarray(args))
+    # one compiled program each (eager transforms would dispatch op by op)
+    J = jax.jit(jax.vmap(jax.jacfwd(f)))(jnp.asarray(args))
+    H = jax.jit(jax.vmap(jax.hessian(total)))(jnp.asarray(args))
     assert np.isfinite(J).all() and np.isfinite(H).all(), name
     assert np.any(J[0]) and np.any(J[1])
 
@@ -338,11 +339,11 @@ def test_log_of_exp_has_identity_derivative_and_zero_second_derivative():
     def round_trip(v):
         return rj.se3_log(rj.se3_exp(v))
 
-    J = jax.vmap(jax.jacfwd(round_trip))(x)
+    J = jax.jit(jax.vmap(jax.jacfwd(round_trip)))(x)
     assert_close(J, np.broadcast_to(np.eye(6), J.shape), atol=1e-9)
     small = np.linalg.norm(np.asarray(x[:, :3]), axis=-1) < 3
     assert_close(J[small], np.broadcast_to(np.eye(6), J[small].shape), atol=64 * EPS[np.float64])
-    H = jax.vmap(jax.jacfwd(jax.jacfwd(round_trip)))(x[small])
+    H = jax.jit(jax.vmap(jax.jacfwd(jax.jacfwd(round_trip))))(x[small])
     assert_close(H, np.zeros(H.shape), atol=1e-11)
 
 
@@ -350,17 +351,20 @@ def test_derivatives_at_zero_are_exact():
     """At 0: d exp(xi) = hat(d xi); d Jl(p)[., .] / dp = hat(.)/2, d Jr = -hat/2, and the
     second derivative of Jl at 0 is that of the series, (P^2)/6's."""
     z = jnp.zeros(6)
-    D = np.asarray(jax.jacfwd(rj.se3_exp)(z))
+    D = np.asarray(jax.jit(jax.jacfwd(rj.se3_exp))(z))
     for i in range(6):
         assert_close(D[..., i], rj.hat(np.eye(6)[i]), atol=0)
+    # compiled once, for both points
+    jac_l, jac_r = (jax.jit(jax.jacfwd(f)) for f in (rj.so3_left_jacobian, rj.so3_right_jacobian))
+    hess_l = jax.jit(jax.hessian(rj.so3_left_jacobian))
     for p0 in (np.zeros(3), np.full(3, 1e-300)):
-        dJl = np.asarray(jax.jacfwd(rj.so3_left_jacobian)(jnp.asarray(p0)))
-        dJr = np.asarray(jax.jacfwd(rj.so3_right_jacobian)(jnp.asarray(p0)))
+        dJl = np.asarray(jac_l(jnp.asarray(p0)))
+        dJr = np.asarray(jac_r(jnp.asarray(p0)))
         for i in range(3):
             # (at 1e-300 the exact derivative differs from that at 0 by O(1e-300))
             assert_close(dJl[..., i], np.asarray(rj.hat(np.eye(3)[i])) / 2, atol=1e-299)
             assert_close(dJr[..., i], -np.asarray(rj.hat(np.eye(3)[i])) / 2, atol=1e-299)
-        H = np.asarray(jax.hessian(rj.so3_left_jacobian)(jnp.asarray(p0)))
+        H = np.asarray(hess_l(jnp.asarray(p0)))
         e = np.eye(3)
         for i in range(3):
             for j in range(3):
