@@ -20,7 +20,7 @@ from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
 from ._numerics import cross, matvec, max_abs, public, to_scalar_last, unit_scale
 from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix
-from ._rotation import Rotation, _concrete, _float, _identity_quat, _input
+from ._rotation import Rotation, _concrete, _float, _identity_quat, _input, _Sequence
 from ._rotvec import _quat_to_rotvec
 from ._se3 import _combo_apply, _inv_coeffs, _so3_coeffs
 
@@ -249,7 +249,7 @@ def _check_index(indexer, n: int):
 
 
 @jax.tree_util.register_pytree_node_class
-class RigidTransform:
+class RigidTransform(_Sequence):
     """Rigid transforms (rotation and translation) in 3 dimensions, scipy's API on JAX arrays.
 
     `T v = R v + t`: a rotation `R` followed by a translation `t`; as a matrix
@@ -294,6 +294,7 @@ class RigidTransform:
     """
 
     __slots__ = ("_quat", "_translation")
+    _NOUN = "transform"
 
     def __init__(self, matrix: ArrayLike, normalize: bool = True, copy: bool = True):
         del copy  # JAX arrays are immutable: there is nothing to copy
@@ -356,20 +357,6 @@ class RigidTransform:
     def translation(self) -> Array:
         """The translation part, `(..., 3)`."""
         return self._translation
-
-    def __len__(self) -> int:
-        """Length of the first batch axis. Raises TypeError for a single transform."""
-        if self.single:
-            raise TypeError("Single transform has no len")
-        return self._quat.shape[0]
-
-    def __bool__(self) -> bool:
-        return True
-
-    def __iter__(self):
-        if self.single:
-            raise TypeError("Single transform is not iterable.")
-        return (RigidTransform._raw(self._quat[i], self._translation[i]) for i in range(len(self)))
 
     def _index(self, indexer):
         """The index of both leaves: ``indexer`` over the batch axes, all of the last axis."""

@@ -154,8 +154,30 @@ def _is_key(x) -> bool:
     return False
 
 
+class _Sequence:
+    """scipy's sequence protocol, shared by `Rotation` and `RigidTransform`: the first batch
+    axis is the sequence; a single element has no length and is not iterable."""
+
+    __slots__ = ()
+    _NOUN = "element"
+
+    def __len__(self) -> int:
+        """Length of the first batch axis. Raises TypeError for a single element."""
+        if self.single:
+            raise TypeError(f"Single {self._NOUN} has no len().")
+        return self.shape[0]
+
+    def __bool__(self) -> bool:
+        return True
+
+    def __iter__(self):
+        if self.single:
+            raise TypeError(f"Single {self._NOUN} is not iterable.")
+        return (self[i] for i in range(len(self)))
+
+
 @jax.tree_util.register_pytree_node_class
-class Rotation:
+class Rotation(_Sequence):
     """Rotations in 3 dimensions, scipy's `Rotation` API on one JAX array.
 
     A `Rotation` holds a `(..., 4)` quaternion `[x, y, z, w]` (scalar last), the only
@@ -210,6 +232,7 @@ class Rotation:
     # the same for every constructor, method and operator (a scan carry, both branches of a
     # cond), and the value alone decides the result.
     __slots__ = ("_stored",)
+    _NOUN = "rotation"
     # NumPy's operators defer to ours (``array * r`` is not an object-array product), and ours
     # return NotImplemented for unknown operands, so another class's reflected operator runs.
     __array_ufunc__ = None
@@ -276,20 +299,6 @@ class Rotation:
     def quat(self) -> Array:
         """The stored `(..., 4)` unit quaternion, scalar last (jax.scipy's field)."""
         return self._quat
-
-    def __len__(self) -> int:
-        """Length of the first batch axis. Raises TypeError for a single rotation."""
-        if self.single:
-            raise TypeError("Single rotation has no len().")
-        return self._stored.shape[0]
-
-    def __bool__(self) -> bool:
-        return True
-
-    def __iter__(self):
-        if self.single:
-            raise TypeError("Single rotation is not iterable.")
-        return (Rotation._raw(self._stored[i]) for i in range(len(self)))
 
     def _index(self, indexer):
         if self.single:
