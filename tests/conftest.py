@@ -10,7 +10,8 @@ loaded. Tracing and lowering still run every time (errors raised while tracing a
 before).
 
 The exhaustive sweeps are marked ``slow`` and left out of the default run (``-m "not slow"``
-in pyproject.toml's addopts); ``-m slow`` runs them, ``-m ""`` everything."""
+in pyproject.toml's addopts): the Euler sequences outside ``helpers.FAST_SEQS`` (marked here),
+and the cases that ``helpers.sweep`` leaves out. ``-m slow`` runs them, ``-m ""`` everything."""
 
 import os
 import shutil

@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import SEQS, angle_diff, assert_close, is_proper, random_quaternions
+from helpers import SEQS, angle_diff, assert_close, is_proper, random_quaternions, sweep
 from jax.test_util import check_grads
 
 import rotjax as rj
@@ -53,14 +53,14 @@ def _noisy_batch(seed):
     return R + np.array([0.0, 1e-3, 0.1])[:, None, None] * rng.normal(size=R.shape)
 
 
-@pytest.mark.parametrize("name", sorted(MATRIX_FUNCTIONS))
+@pytest.mark.parametrize("name", sweep(sorted(MATRIX_FUNCTIONS), fast=["shepperd"]))
 def test_check_grads_matrix_functions_on_and_off_so3(name):
     """The derivative of the function computed, in every direction (check_grads draws random
     3x3 directions), to second order, in both modes."""
     check_grads(MATRIX_FUNCTIONS[name], (_noisy_batch(3),), order=2, modes=("fwd", "rev"))
 
 
-@pytest.mark.parametrize("seq", ["ZXZ", "xyz"])
+@pytest.mark.parametrize("seq", sweep(["ZXZ", "xyz"], fast=["xyz"]))
 def test_check_grads_matrix_to_euler_on_and_off_so3(seq):
     f = lambda m: rj.matrix_to_euler(m, seq)  # noqa: E731
     check_grads(f, (_noisy_batch(4),), order=2, modes=("fwd", "rev"))
@@ -496,7 +496,7 @@ _F32_PROGRAMS = {
 }
 
 
-@pytest.mark.parametrize("name", list(_F32_PROGRAMS))
+@pytest.mark.parametrize("name", sweep(_F32_PROGRAMS, fast=list(_F32_PROGRAMS)[::3]))
 def test_float32_programs_hold_no_float64_array(name):
     """With x64 on, a float32 call compiles to float32 arithmetic, forward and jit(grad): a
     float64 array (e.g. ``jnp.where`` on two Python numbers) would be computed and converted in

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import mpmath
 import numpy as np
 import pytest
+from helpers import sweep
 from jax.test_util import check_grads
 from scipy.spatial.transform import Rotation
 
@@ -113,7 +114,7 @@ POINTS = {
 }
 
 
-@pytest.mark.parametrize("name", list(POINTS))
+@pytest.mark.parametrize("name", sweep(POINTS, fast=["180 deg"]))
 def test_second_derivatives(name):
     # Sign-free outputs (the matrix), so the w >= 0 choice at 180 degrees does not matter.
     M = POINTS[name]
@@ -122,6 +123,7 @@ def test_second_derivatives(name):
     assert np.isfinite(H).all()
 
 
+@pytest.mark.slow
 def test_mean_and_align_hessians_finite():
     q = jnp.tile(jnp.array([0.1, 0.2, 0.3, 0.9]), (3, 1))
     assert np.isfinite(jax.hessian(rj.quaternion_mean)(q)).all()
@@ -189,7 +191,7 @@ def test_exact_rotations_under_jit():
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-@pytest.mark.parametrize("chunks", [(2, 5), (2, 0)])
+@pytest.mark.parametrize("chunks", sweep([(2, 5), (2, 0)], fast=[(2, 5)]))
 def test_chunked_batches_agree_with_one_piece(chunks, dtype):
     """Large batches run in chunks on the CPU (padded where the batch is not a multiple; the
     chunk size depends on the dtype): the same vectors as the kernel applied in one piece, in
@@ -373,6 +375,7 @@ def test_kernel_converges_on_many_noisy_matrices(scale, noise, dtype):
     assert res.max() <= 16 * np.finfo(dtype).eps
 
 
+@pytest.mark.slow
 def test_rules_equal_jax_derivative_of_the_kernel_code():
     """The derivative rules of ``nearest_quaternion`` and ``nearest_rotation`` equal JAX's own
     derivative of the forward code (the Jacobi sweeps, the rotation from the columns and the

@@ -13,6 +13,7 @@ from helpers import (
     assert_same_rotation,
     fd_jacobian,
     random_quaternions,
+    sweep,
     ulp,
 )
 from jax.test_util import check_grads
@@ -269,7 +270,7 @@ def test_mean_broadcasts_shared_quaternions_against_batched_weights(n):
         assert_close(batched[k], rj.quaternion_mean(q, w[k]), atol=1e-14)
 
 
-@pytest.mark.parametrize("n", [8, 30])
+@pytest.mark.parametrize("n", sweep([8, 30], fast=[8]))
 @pytest.mark.parametrize("scale", [1.0, 1e-170])
 def test_sum_outer_rule_equals_jax_derivative_of_its_code(n, scale):
     # At 1e-170 the products of x and y underflow unless the factors are applied inside them,
@@ -354,7 +355,7 @@ def test_align_check_grads(method):
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("dtype", sweep(DTYPES, fast=[np.float64]))
 def test_align_single_pair(method, dtype):
     """One pair: R is unique only up to a rotation about a, but R b = |b| a / |a| is unique.
 

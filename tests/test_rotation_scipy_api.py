@@ -115,6 +115,7 @@ def test_empty_batches_construct(xp):
         assert len(r) == 0 and r.as_matrix().shape == (0, 3, 3)
 
 
+@pytest.mark.slow
 def test_constant_attitude_spline_has_exactly_zero_rates():
     from rotjax import RotationSpline
 

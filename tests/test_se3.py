@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import mpmath as mp
 import numpy as np
 import pytest
-from helpers import assert_close
+from helpers import assert_close, sweep
 from scipy.linalg import expm
 from scipy.spatial.transform import RigidTransform as SRigid
 
@@ -309,7 +309,10 @@ SPECIAL = np.concatenate(
 
 @pytest.mark.parametrize(
     "name",
-    ["se3_exp", "se3_log", "se3_adjoint", *SE3_FUNS[1:], *SO3_FUNS, "hat", "vee"],
+    sweep(
+        ["se3_exp", "se3_log", "se3_adjoint", *SE3_FUNS[1:], *SO3_FUNS, "hat", "vee"],
+        fast=["se3_log", "se3_adjoint", "hat", "vee"],
+    ),
 )
 def test_first_and_second_derivatives_are_finite_at_singular_points(name):
     f = getattr(rj, name)
