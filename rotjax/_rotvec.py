@@ -173,7 +173,7 @@ def _rotvec_scale(n2, w):
 @jax.custom_jvp
 def _quat_to_rotvec(q):
     """Logarithm map of a scalar-last quaternion of any finite non-zero norm; angle in
-    [0, pi] (see :func:`_rotvec_scale`); every step a per-rotation scalar expression: one
+    [0, pi] (see `_rotvec_scale`); every step a per-rotation scalar expression: one
     fused loop."""
     (x, y, z, w), _ = _prescaled_parts(q)  # NaN for the zero quaternion or a non-finite one
     k = _rotvec_scale(x * x + y * y + z * z, w)
