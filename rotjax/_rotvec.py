@@ -132,31 +132,69 @@ _ATAN_RATIO = {
 }  # fmt: skip
 
 
-def _quat_to_rotvec(q):
-    """Logarithm map of a scalar-last quaternion of any finite non-zero norm; angle in
-    [0, pi].
+@jax.custom_jvp
+def _atan_ratio(u):
+    """`atan(t) / t` for `u = t^2` in `[0, 1]`: the polynomial `_ATAN_RATIO`. Its derivative is
+    that of the same polynomial, evaluated as one (a second Horner loop on the derivative's
+    coefficients rather than JAX's transpose of the first, which is longer code)."""
+    return _horner(_ATAN_RATIO[jnp.dtype(u.dtype).itemsize], u)
 
-    ``2 atan2(n, |w|) / n`` (``n = |q_v|``) without a root of ``n``, an atan2 or a division:
-    with ``m`` the larger and ``l`` the smaller of ``n``, ``|w|`` (``m^2 >= 1/8`` after the
-    prescaling: rsqrt's domain) and ``u = l^2 / m^2``, ``atan(l / m) = (l / m) f(u)`` with the
-    polynomial ``f`` above; it is the angle's half where ``n <= |w|``, else its complement to
-    ``pi/2``. Smooth in ``n^2`` at the identity (``d rotvec / d q_v = 2 I`` for a unit ``q``),
-    every step a per-rotation scalar expression: one fused loop.
+
+@_atan_ratio.defjvp
+def _atan_ratio_jvp(primals, tangents):
+    (u,), (du,) = primals, tangents
+    coeffs = _ATAN_RATIO[jnp.dtype(u.dtype).itemsize]
+    top = len(coeffs) - 1
+    slope = _horner([c * (top - i) for i, c in enumerate(coeffs[:-1])], u)
+    return _atan_ratio(u), slope * du
+
+
+def _rotvec_scale(n2, w):
+    """`k = 2 atan2(n, |w|) / n` (sign of `w` included, so that the angle is in [0, pi]) from
+    `n^2 = |q_v|^2` and `w` of a prescaled quaternion: the rotation vector is `k q_v`.
+
+    Without a root of ``n``, an atan2 or a division: with ``m`` the larger and ``l`` the
+    smaller of ``n``, ``|w|`` (``m^2 >= 1/8`` after the prescaling: rsqrt's domain) and
+    ``u = l^2 / m^2``, ``atan(l / m) = (l / m) f(u)`` with the polynomial ``f`` above; it is
+    the angle's half where ``n <= |w|``, else its complement to ``pi/2``. Smooth in ``n^2`` at
+    the identity (``d rotvec / d q_v = 2 I`` for a unit ``q``).
     """
-    (x, y, z, w), _ = _prescaled_parts(q)  # NaN for the zero quaternion or a non-finite one
     sign = select(w < 0, -1.0, 1.0, w.dtype)  # w >= 0 gives the angle in [0, pi]
     aw = sign * w
-    n2, w2 = x * x + y * y + z * z, aw * aw
+    w2 = aw * aw
     near = n2 <= w2
     inv_m = rsqrt(jnp.where(near, w2, n2))
     u = jnp.where(near, n2, w2) * (inv_m * inv_m)
-    coeffs = _ATAN_RATIO[jnp.dtype(w.dtype).itemsize]
-    f = jnp.full_like(u, coeffs[0])
-    for c in coeffs[1:]:
-        f = f * u + c
+    f = _atan_ratio(u)
     half = jnp.where(near, f, 0.5 * np.pi - aw * inv_m * f)  # atan2(n, |w|) * m / m
-    k = (2 * sign) * inv_m * half
+    return (2 * sign) * inv_m * half
+
+
+@jax.custom_jvp
+def _quat_to_rotvec(q):
+    """Logarithm map of a scalar-last quaternion of any finite non-zero norm; angle in
+    [0, pi] (see `_rotvec_scale`); every step a per-rotation scalar expression: one
+    fused loop."""
+    (x, y, z, w), _ = _prescaled_parts(q)  # NaN for the zero quaternion or a non-finite one
+    k = _rotvec_scale(x * x + y * y + z * z, w)
     return _stack([k * x, k * y, k * z])
+
+
+@_quat_to_rotvec.defjvp
+def _quat_to_rotvec_jvp(primals, tangents):
+    # JAX's derivative of the code above, grouped: with the prescaled components (s a constant
+    # power of two), d(k v) = k dv + v dk, dk = 2 k_n2 (v . dv) + k_w dw, where k_n2 and k_w
+    # are JAX's derivatives of _rotvec_scale (forward mode, per rotation). In reverse mode only
+    # this small linear part is transposed, into one loop; the tangent's components are read
+    # from a leading axis, so that the cotangent is written like the forward's output.
+    (q,), (dq,) = primals, tangents
+    (x, y, z, w), s = _prescaled_parts(q)
+    n2 = x * x + y * y + z * z
+    k, k_n2 = jax.jvp(_rotvec_scale, (n2, w), (jnp.ones_like(n2), jnp.zeros_like(w)))
+    _, k_w = jax.jvp(_rotvec_scale, (n2, w), (jnp.zeros_like(n2), jnp.ones_like(w)))
+    dx, dy, dz, dw = (t[0] * s for t in jnp.split(jnp.moveaxis(dq, -1, 0), 4, axis=0))
+    dk = 2 * k_n2 * (x * dx + y * dy + z * dz) + k_w * dw
+    return _quat_to_rotvec(q), _stack([k * dx + x * dk, k * dy + y * dk, k * dz + z * dk])
 
 
 @public

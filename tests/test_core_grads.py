@@ -393,6 +393,50 @@ def test_shepperd_hand_written_derivative_equals_autodiff_of_its_formula(which):
     assert_close(g / scale, g_ref / scale, atol=1e-14)
 
 
+def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula():
+    """quaternion_to_rotvec's custom jvp (and its transpose, and second derivatives) equals JAX's
+    own derivative of the forward code, and the rule of its polynomial that of JAX on the
+    polynomial: quaternions of norms 1e-20 to 1e20, identity and near it, 180 degrees, both
+    signs of w, and n = |w| (the switch between the two atan forms)."""
+    from rotjax._rotvec import _atan_ratio, _quat_to_rotvec
+
+    rng = np.random.default_rng(23)
+    special = [
+        [0, 0, 0, 1.0], [0, 0, 0, -2.0], [1e-9, -2e-9, 0, 1], [1.0, 0, 0, 0], [0, 3, 4, 0],
+        [0.6, 0, 0.8, 1.0], [-0.6, 0, 0.8, -1.0], [1e-12, 0, 0, -1], [1, 2, 2, 1e-9],
+    ]  # fmt: skip
+    q = np.concatenate([special, rng.normal(size=(24, 4))])
+    q = jnp.asarray(q * np.exp(rng.uniform(-46, 46, size=(len(q), 1))))
+    dq = jnp.asarray(rng.normal(size=q.shape)) * jnp.linalg.norm(q, axis=-1, keepdims=True)
+    jit = jax.jit
+    out, jv = jit(lambda x, t: jax.jvp(_quat_to_rotvec, (x,), (t,)))(q, dq)
+    out_ref, jv_ref = jit(lambda x, t: jax.jvp(_quat_to_rotvec.fun, (x,), (t,)))(q, dq)
+    np.testing.assert_array_equal(out, out_ref)
+    scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
+    assert_close(jv / scale, jv_ref / scale, atol=1e-14)
+    ct = jnp.asarray(rng.normal(size=out.shape))
+    g = jit(jax.grad(lambda x: jnp.sum(ct * _quat_to_rotvec(x))))(q)
+    g_ref = jit(jax.grad(lambda x: jnp.sum(ct * _quat_to_rotvec.fun(x))))(q)
+    assert np.all(np.isfinite(np.asarray(g)))
+    scale = np.abs(np.asarray(g_ref)).max(axis=-1, keepdims=True)
+    assert_close(g / scale, g_ref / scale, atol=1e-14)
+    for x in (q[-1] / jnp.linalg.norm(q[-1]), q[2], q[3]):  # generic, near identity, 180 degrees
+        h = jax.hessian(_quat_to_rotvec)(x)
+        h_ref = jax.hessian(_quat_to_rotvec.fun)(x)
+        assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
+    u = jnp.linspace(0.0, 1.0, 257)
+    for dtype, tol in ((jnp.float64, 1e-15), (jnp.float32, 1e-6)):
+        d = jax.vmap(jax.grad(_atan_ratio))(u.astype(dtype))
+        d_ref = jax.vmap(jax.grad(_atan_ratio.fun))(u.astype(dtype))
+        assert d.dtype == dtype
+        assert_close(d, d_ref, atol=tol)
+    # no rotation: NaN derivative, as JAX's of the forward code
+    bad = jnp.array([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]])
+    g = jax.grad(lambda x: jnp.sum(_quat_to_rotvec(x)))(bad)
+    g_ref = jax.grad(lambda x: jnp.sum(_quat_to_rotvec.fun(x)))(bad)
+    np.testing.assert_array_equal(np.isnan(g), np.isnan(g_ref))
+
+
 @pytest.mark.parametrize("method", ["shepperd", "markley", "optimal"])
 def test_matrix_to_quaternion_float32_derivatives_stay_float32(method):
     """The hand-written derivatives keep the input dtype, in both modes (a float64 constant
