@@ -198,7 +198,9 @@ def test_dual_quat_matches_scipy(dq, scalar_first):
         unit = real / np.abs(real).max()
         assert_close(got[:4], unit / np.linalg.norm(unit), atol=1e-15)
         return
-    n = max(np.linalg.norm(dq[:4]), 1e-3)
+    # Rounding at the scale of the dual part divided by |real| (before its component along the
+    # real part is removed), however small |real|; a zero real part divides by 1.
+    n = np.linalg.norm(real) if np.abs(real).max() >= tiny else 1.0
     assert_close(got, ref, atol=1e-14 * (1 + np.abs(dq).max() / n))
     if np.linalg.norm(dq[:4]) > 1e-3:
         tf = Tf.from_dual_quat(dq, scalar_first=scalar_first)
