@@ -188,13 +188,14 @@ def _quat_to_rotvec_jvp(primals, tangents):
     # this small linear part is transposed, into one loop; the tangent's components are read
     # from a leading axis, so that the cotangent is written like the forward's output.
     (q,), (dq,) = primals, tangents
-    (x, y, z, w), s = _prescaled_parts(q)
+    (x, y, z, w), s = _prescaled_parts(q)  # read once: the value is the forward's, from k
     n2 = x * x + y * y + z * z
     k, k_n2 = jax.jvp(_rotvec_scale, (n2, w), (jnp.ones_like(n2), jnp.zeros_like(w)))
     _, k_w = jax.jvp(_rotvec_scale, (n2, w), (jnp.zeros_like(n2), jnp.ones_like(w)))
     dx, dy, dz, dw = (t[0] * s for t in jnp.split(jnp.moveaxis(dq, -1, 0), 4, axis=0))
     dk = 2 * k_n2 * (x * dx + y * dy + z * dz) + k_w * dw
-    return _quat_to_rotvec(q), _stack([k * dx + x * dk, k * dy + y * dk, k * dz + z * dk])
+    out = _stack([k * x, k * y, k * z])
+    return out, _stack([k * dx + x * dk, k * dy + y * dk, k * dz + z * dk])
 
 
 @public
