@@ -483,6 +483,15 @@ def test_merge_replaces_the_measured_operations_and_notes_the_run():
     assert [e["date"] for e in R.later_runs(again)] == ["d2"]
     with pytest.raises(ValueError, match="batch"):
         R.merge(meta, rows, {**new_meta, "batch": 16}, rows)
+    # a run of some dtypes replaces those rows only, and its note names them
+    typed = [{"op": op, "impl": "rotjax", "dtype": dt, "v": 0} for op in ops for dt in "ab"]
+    part_meta, part = R.merge(meta, typed, new_meta, [{"op": ops[0], "dtype": "b", "v": 1}])
+    assert [(r["op"], r["dtype"], r["v"]) for r in part][:2] == [(ops[0], "a", 0), (ops[0], "b", 1)]
+    assert len(part) == len(typed)
+    assert f"Rows of {ops[0]} (b) from a run of d1" in R.provenance(part_meta)
+    # ... and the next run of all of them drops the partial note
+    full_meta, _ = R.merge(part_meta, part, {**new_meta, "date": "d2"}, typed[:2])
+    assert [(e["date"], e.get("dtypes")) for e in R.later_runs(full_meta)] == [("d2", None)]
     # a run on another machine says so
     other = {**new_meta, "machine": {"cpu": "Other CPU", "cores": 2}}
     elsewhere, _ = R.merge({**meta, "machine": {"cpu": "CPU", "cores": 2}}, rows, other, rows[:1])

@@ -17,6 +17,7 @@ DEFAULT_OUT = "bench_out"
 MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": str(1 << 30), "MALLOC_TRIM_THRESHOLD_": str(1 << 30)}
 # scipy's Rotation computes on JAX arrays (jitted) only with this set before scipy is imported.
 SCIPY_ENV = {"SCIPY_ARRAY_API": "1"}
+DTYPES = ("float32", "float64", "bfloat16", "float16")
 
 RUN_HELP = """\
 Measure every operation, method and dtype against the importable peers (scipy's Rotation on
@@ -163,6 +164,13 @@ def main(argv: list[str] | None = None) -> int:
         "not timed, noted in bench.json",
     )
     p.add_argument(
+        "--dtypes",
+        default=None,
+        help=f"comma-separated subset of {','.join(DTYPES)} (default: float32 and float64, and "
+        "the low-precision ones where an operation has them); --merge-into keeps the other "
+        "dtypes' rows",
+    )
+    p.add_argument(
         "--pin-malloc",
         action="store_true",
         help="glibc's mmap and trim thresholds at 1 GiB (default: glibc's defaults, as users run)",
@@ -173,6 +181,9 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(args.ops.split(",") if args.ops else ()) - set(CASES))
     if unknown:
         p.error(f"unknown operations {unknown}; expected some of {sorted(CASES)}")
+    dtypes = args.dtypes.split(",") if args.dtypes else None
+    if dtypes is not None and not set(dtypes) <= set(DTYPES):
+        p.error(f"unknown dtypes {sorted(set(dtypes) - set(DTYPES))}; expected some of {DTYPES}")
     want = {**SCIPY_ENV, **(MALLOC_ENV if args.pin_malloc else {})}
     if any(os.environ.get(k) != v for k, v in want.items()):
         # glibc and scipy read these once, at start-up: measure in a child that has them.
@@ -203,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
             "malloc_env": {k: os.environ.get(k) for k in MALLOC_ENV},
             **settings(args.quick, args.rounds, args.accuracy_samples),
             "grad_not_timed": skip_grad,
+            **({"dtypes": dtypes} if dtypes else {}),
             "seconds": round(time.perf_counter() - t0, 1),
             "columns": list(report.COLUMNS),
         }
@@ -211,7 +223,14 @@ def main(argv: list[str] | None = None) -> int:
         (out_dir / "bench.partial.json").write_text(report.dumps(make_meta(), _json_rows(rows)))
 
     rows = run(
-        args.quick, ops, args.log2_batch, args.rounds, args.accuracy_samples, partial, skip_grad
+        args.quick,
+        ops,
+        args.log2_batch,
+        args.rounds,
+        args.accuracy_samples,
+        partial,
+        skip_grad,
+        dtypes,
     )
     meta = make_meta()
     text = report.table(rows)  # before the JSON conversion: an infinite error prints as inf

@@ -96,12 +96,17 @@ def merge(meta, rows, new_meta, new_rows, why=""):
                 f"cannot merge a run of {key} {new_meta.get(key)!r} into one of {meta.get(key)!r}"
             )
     ops = {r["op"] for r in new_rows}
-    kept = [r for r in rows if r["op"] not in ops]
+    measured = {(r["op"], r.get("dtype")) for r in new_rows}
+    kept = [r for r in rows if (r["op"], r.get("dtype")) not in measured]
     order = {op: i for i, op in enumerate(CASES)}
     merged = sorted(kept + new_rows, key=lambda r: order.get(r["op"], len(order)))  # stable
-    later = [{**e, "ops": [op for op in e["ops"] if op not in ops]} for e in later_runs(meta)]
+    # An earlier note keeps an operation some of whose dtypes the new run left as they were.
+    whole = ops - {r["op"] for r in kept}
+    later = [{**e, "ops": [op for op in e["ops"] if op not in whole]} for e in later_runs(meta)]
     later = [e for e in later if e["ops"]]
     entry = {"ops": sorted(ops, key=order.get), "date": new_meta["date"]}
+    if ops - whole:
+        entry["dtypes"] = sorted({dt for _, dt in measured if dt is not None})
     entry.update(seconds=new_meta.get("seconds"), versions=new_meta.get("versions"))
     for key in ("malloc_env", "commit", "rounds", "accuracy_samples"):
         if key in new_meta:
@@ -261,7 +266,8 @@ def provenance(meta) -> str:
     for later in later_runs(meta):
         on = f" on {_machine(later['machine'])}" if later.get("machine") else ""
         alloc = f", {allocator(later)}" if "malloc_env" in later else ""
-        line += f" Rows of {', '.join(later['ops'])} from a run of {later['date']}{on}{alloc}."
+        dts = f" ({', '.join(later['dtypes'])})" if later.get("dtypes") else ""
+        line += f" Rows of {', '.join(later['ops'])}{dts} from a run of {later['date']}{on}{alloc}."
     return line
 
 

@@ -38,12 +38,14 @@ def run(
     accuracy_samples=None,
     done=None,
     skip_grad=(),
+    dtypes=None,
 ) -> list[dict]:
     """The rows of the benchmark (see ``report.COLUMNS``) for ``ops`` (default: every case,
     or the quick ones), on a batch of ``2**log2_batch`` rotations, in ``rounds`` interleaved
     rounds, with ``accuracy_samples`` inputs per accuracy set (see :func:`settings`).
     ``done(rows)``, if given, is called with the rows so far after each operation;
-    ``skip_grad``: contenders (``impl:method`` labels) whose ``jit(grad)`` is not timed."""
+    ``skip_grad``: contenders (``impl:method`` labels) whose ``jit(grad)`` is not timed;
+    ``dtypes``: measure only these of each operation's dtypes."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -74,7 +76,8 @@ def run(
     for op in ops:
         case = C.CASES[op]
         x64 = C.INPUTS[case.input](np.random.default_rng(2025), q_batch)
-        for dt in ["float32", "float64"] + (["bfloat16", "float16"] if op in low else []):
+        op_dtypes = ["float32", "float64"] + (["bfloat16", "float16"] if op in low else [])
+        for dt in [dt for dt in op_dtypes if dtypes is None or dt in dtypes]:
             log(f"[bench {time.perf_counter() - t_start:6.1f}s] {op} {dt}")
             jdt = jnp.dtype(dt)
             np_dt = np.float64 if dt == "float64" else np.float32
