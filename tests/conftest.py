@@ -11,7 +11,9 @@ before).
 
 The exhaustive sweeps are marked ``slow`` and left out of the default run (``-m "not slow"``
 in pyproject.toml's addopts): the Euler sequences outside ``helpers.FAST_SEQS`` (marked here),
-and the cases that ``helpers.sweep`` leaves out. ``-m slow`` runs them, ``-m ""`` everything."""
+the cases that ``helpers.sweep`` leaves out, and a few whole second-derivative checks (marked
+where they are defined). ``-m slow`` runs them, ``-m ""`` everything. With ``-n``, each test
+file runs in one worker (``--dist loadfile``), so that its parametrizations share programs."""
 
 import os
 import shutil

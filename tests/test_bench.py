@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import mpmath as mp
 import numpy as np
 import pytest
-from helpers import SEQS, ulp
+from helpers import SEQS, sweep, ulp
 from jax.test_util import check_grads
 
 import rotjax as rj
@@ -38,7 +38,7 @@ def _mp_quaternions(q):
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-@pytest.mark.parametrize("set_name", CLEAN_SETS + ["gimbal"])
+@pytest.mark.parametrize("set_name", sweep(CLEAN_SETS + ["gimbal"], fast=["gimbal"]))
 @pytest.mark.parametrize("method", ["shepperd", "markley", "optimal"])
 def test_matrix_to_quaternion_within_bound(qsets, method, set_name, dtype):
     if set_name == "gimbal":
@@ -187,6 +187,7 @@ def test_shepperd_gradients_fwd_and_rev_through_rotvec():
         np.testing.assert_allclose(jac, np.asarray(jax.jacfwd(f)(v)), atol=1e-14)
 
 
+@pytest.mark.slow  # compiles every contender of two operations, and their gradients
 def test_quick_benchmark_writes_json(tmp_path):
     """The CI mode runs end to end (two operations here, to keep the test short); its batch
     stays in cache, so no copy baseline is reported."""
@@ -269,6 +270,7 @@ def test_scipy_on_jax_is_a_jitted_peer_only_with_the_array_api(flag):
     assert dtype == "float32" and callback == "False" and float(err) < 1e-6
 
 
+@pytest.mark.slow  # a batch of 2^20 in several rounds
 def test_copy_baseline_at_a_bandwidth_bound_batch(tmp_path):
     """At 2^20 rotations (past the caches) quaternion_to_matrix, which writes 9 floats per
     rotation, runs at a sane fraction of the copy kernel that moves the same bytes: a copy

@@ -114,7 +114,8 @@ POINTS = {
 }
 
 
-@pytest.mark.parametrize("name", sweep(POINTS, fast=["180 deg"]))
+@pytest.mark.slow  # every point compiles the kernel's second-derivative programs
+@pytest.mark.parametrize("name", list(POINTS))
 def test_second_derivatives(name):
     # Sign-free outputs (the matrix), so the w >= 0 choice at 180 degrees does not matter.
     M = POINTS[name]
@@ -356,7 +357,12 @@ def test_gimbal_lock_matrices_in_a_batch():
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize(
-    ("scale", "noise"), [(1.1, 0.05), (1.0, 0.01), (1.0, 0.3), (-1.0, 0.3), (1.0, 1.0)]
+    ("scale", "noise"),
+    sweep(
+        [(1.1, 0.05), (1.0, 0.01), (1.0, 0.3), (-1.0, 0.3), (1.0, 1.0)],
+        fast=[(-1.0, 0.3)],
+        several=True,
+    ),
 )
 def test_kernel_converges_on_many_noisy_matrices(scale, noise, dtype):
     """The fixed rotation schedule converges for every matrix of a large sample, not only on

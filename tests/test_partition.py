@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import assert_close
+from helpers import assert_close, sweep
 from jax.test_util import check_grads
 
 import rotjax as rj
@@ -44,7 +44,9 @@ def _check_partition(J, part, n_dep, atol):
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-@pytest.mark.parametrize(("m", "n"), [(1, 4), (3, 7), (4, 4), (5, 6)])
+@pytest.mark.parametrize(
+    ("m", "n"), sweep([(1, 4), (3, 7), (4, 4), (5, 6)], fast=[(3, 7)], several=True)
+)
 def test_full_rank_random(m, n, dtype):
     J = _rng(m * n).normal(size=(6, m, n)).astype(dtype)
     with jax.numpy_rank_promotion("raise"):

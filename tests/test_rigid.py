@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import assert_close, assert_same_rotation, sweep
+from helpers import assert_close, assert_same_rotation
 from hypothesis import example, given
 from hypothesis import strategies as st
 from jax.test_util import check_grads
@@ -422,7 +422,10 @@ SINGULAR = {
 }
 
 
-@pytest.mark.parametrize("where", sweep(SINGULAR, fast=["pi"]))
+# Slow: each point compiles the pose's second-derivative programs (test_se3 checks the same
+# coordinates' functions at their singular points by default).
+@pytest.mark.slow
+@pytest.mark.parametrize("where", list(SINGULAR))
 def test_exp_derivatives_finite_and_right(where):
     xi = jnp.concatenate([jnp.asarray(SINGULAR[where]), jnp.asarray([0.3, -1.2, 2.0])])
     f = lambda x: Tf.from_exp_coords(x).as_matrix()  # noqa: E731
@@ -433,10 +436,8 @@ def test_exp_derivatives_finite_and_right(where):
     assert np.all(np.isfinite(hess))
 
 
-@pytest.mark.parametrize(
-    "where",
-    sweep(["zero", "tiny", "small", "threshold", "pi", "x_pi"], fast=["zero"]),
-)
+@pytest.mark.slow  # as test_exp_derivatives_finite_and_right
+@pytest.mark.parametrize("where", ["zero", "tiny", "small", "threshold", "pi", "x_pi"])
 def test_log_derivatives_finite_and_exact(where):
     """log(exp(xi)) = xi for angles up to pi: its Jacobian is the identity, exactly at 0 and
     at 180 degrees too (the derivative of the formula computed)."""
