@@ -25,6 +25,10 @@ class Contender(NamedTuple):
     traceable: bool  # jitted and differentiated (False: called on NumPy arrays)
 
 
+# Every operation in the first two; a case with ``low_precision`` in the other two as well.
+DTYPES = ("float32", "float64", "bfloat16", "float16")
+
+
 @dataclasses.dataclass(frozen=True)
 class Case:
     """One row group of the benchmark.

@@ -17,7 +17,6 @@ DEFAULT_OUT = "bench_out"
 MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": str(1 << 30), "MALLOC_TRIM_THRESHOLD_": str(1 << 30)}
 # scipy's Rotation computes on JAX arrays (jitted) only with this set before scipy is imported.
 SCIPY_ENV = {"SCIPY_ARRAY_API": "1"}
-DTYPES = ("float32", "float64", "bfloat16", "float16")
 
 RUN_HELP = """\
 Measure every operation, method and dtype against the importable peers (scipy's Rotation on
@@ -166,9 +165,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--dtypes",
         default=None,
-        help=f"comma-separated subset of {','.join(DTYPES)} (default: float32 and float64, and "
-        "the low-precision ones where an operation has them); --merge-into keeps the other "
-        "dtypes' rows",
+        help="comma-separated subset of float32,float64,bfloat16,float16 (default: float32 and "
+        "float64, and the low-precision ones where an operation has them); --merge-into keeps "
+        "the other dtypes' rows",
     )
     p.add_argument(
         "--pin-malloc",
@@ -176,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         help="glibc's mmap and trim thresholds at 1 GiB (default: glibc's defaults, as users run)",
     )
     args = p.parse_args(argv)
-    from .cases import CASES
+    from .cases import CASES, DTYPES
 
     unknown = sorted(set(args.ops.split(",") if args.ops else ()) - set(CASES))
     if unknown:

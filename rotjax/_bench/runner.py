@@ -76,7 +76,7 @@ def run(
     for op in ops:
         case = C.CASES[op]
         x64 = C.INPUTS[case.input](np.random.default_rng(2025), q_batch)
-        op_dtypes = ["float32", "float64"] + (["bfloat16", "float16"] if op in low else [])
+        op_dtypes = C.DTYPES if op in low else C.DTYPES[:2]
         for dt in [dt for dt in op_dtypes if dtypes is None or dt in dtypes]:
             log(f"[bench {time.perf_counter() - t_start:6.1f}s] {op} {dt}")
             jdt = jnp.dtype(dt)
