@@ -438,6 +438,7 @@ ALL_OPS = [
     ("quaternion_to_matrix", ""),
     ("quaternion_to_rotvec", ""),
     ("rotvec_to_quaternion", ""),
+    ("quaternion_apply", ""),
     ("integrate_angular_velocity", "exponential"),
 ]
 

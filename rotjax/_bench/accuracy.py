@@ -242,28 +242,38 @@ class Evaluator:
         self.f_jit = None if impl == "scipy" else jax.jit(fn)
 
     def run(self, x):
+        """The contender on ``x``, an array or a tuple of arrays (the rows first in each)."""
+        import jax
         import jax.numpy as jnp
         import numpy as np
 
         if self.impl == "scipy":
             # A writable copy: scipy's compiled from_rotvec rejects a read-only buffer.
             dt = np.float64 if self.acc.dtype == "float64" else np.float32
-            return np.asarray(self.fn(np.array(x, dt)))
+            return np.asarray(self.fn(jax.tree.map(lambda v: np.array(v, dt), x)))
         # Padding, slicing and casts in NumPy: as JAX ops, each new shape would compile.
-        x, m = np.asarray(x), len(x)
+        x = jax.tree.map(np.asarray, x)
+        m = len(jax.tree.leaves(x)[0])
         if self.compiled is not None and m <= self.batch:
-            pad = np.broadcast_to(x[:1], (self.batch - m, *x.shape[1:]))
-            out = self.compiled(jnp.asarray(np.concatenate([x, pad]), dtype=self.jnp_dtype))
+            x = jax.tree.map(
+                lambda v: np.concatenate(
+                    [v, np.broadcast_to(v[:1], (self.batch - m, *v.shape[1:]))]
+                ),
+                x,
+            )
+            out = self.compiled(jax.tree.map(lambda v: jnp.asarray(v, dtype=self.jnp_dtype), x))
         else:
-            out = self.f_jit(jnp.asarray(x, dtype=self.jnp_dtype))
+            out = self.f_jit(jax.tree.map(lambda v: jnp.asarray(v, dtype=self.jnp_dtype), x))
         return np.asarray(out)[:m].astype(np.float64)
 
     def run_sets(self, sets):
         """``{name: output}`` of one call on the concatenation of ``{name: input}``."""
+        import jax
         import numpy as np
 
-        out = self.run(np.concatenate(list(sets.values())))
-        ends = np.cumsum([len(v) for v in sets.values()])
+        joined = jax.tree.map(lambda *vs: np.concatenate(vs), *sets.values())
+        out = self.run(joined)
+        ends = np.cumsum([len(jax.tree.leaves(v)[0]) for v in sets.values()])
         return dict(zip(sets, np.split(out, ends[:-1]), strict=True))
 
 
@@ -343,6 +353,26 @@ def quaternion_to_matrix_errors(ev):
             [[[float(c) for c in row] for row in mp_quat_to_matrix(q)] for q in acc.qsets[k]]
         )
         errs[k] = np.abs(got - ref).reshape(len(ref), -1).max(-1)
+    return errs
+
+
+def quaternion_apply_errors(ev):
+    """Componentwise, against ``R(q) v`` of the (rounded) input quaternion and vector, for
+    vectors ``v ~ N(0, I)``."""
+    import numpy as np
+
+    acc, rng = ev.acc, np.random.default_rng(11)
+    sets = {
+        k: (acc.qsets[k], as_dtype(rng.normal(size=(len(acc.qsets[k]), 3)), acc.dtype))
+        for k in BASIC_SETS
+    }
+    errs = {}
+    for k, got in ev.run_sets(sets).items():
+        ref = []
+        for q, v in zip(*sets[k], strict=True):
+            m = mp_quat_to_matrix(q)
+            ref.append([float(sum(r * float(c) for r, c in zip(row, v, strict=True))) for row in m])
+        errs[k] = np.abs(got - np.array(ref)).max(-1)
     return errs
 
 

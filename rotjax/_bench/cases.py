@@ -94,6 +94,9 @@ INPUTS = {
     ),
     "rotvec": lambda rng, q: 0.7 * rng.normal(size=(len(q), 3)),
     "quaternion_omega": _omega,
+    # as a caller of quaternion_apply(q, v) holds them: two arrays (slices of one would be
+    # copied before the call, and their cotangents padded back)
+    "quaternion_vector": lambda rng, q: (q, rng.normal(size=(len(q), 3))),
     "vector_pairs": _vector_pairs,
     "quaternion_groups": _quaternion_groups,
     "omega": lambda rng, q: rng.normal(size=(len(q), 3)),
@@ -298,6 +301,38 @@ def _same(x):
     return x
 
 
+def _roll_quaternion_first(x):
+    """``(q scalar last, v)`` to jaxlie's ``(wxyz, v)``."""
+    import jax.numpy as jnp
+
+    return jnp.roll(x[0], 1, axis=-1), x[1]
+
+
+def _apply_contenders(p):
+    """``R(q) v`` on ``(q, v)``: rotjax's function and class, jax.scipy, jaxlie, scipy."""
+    import jax
+
+    from .. import Rotation, quaternion_apply
+
+    out = [
+        Contender("rotjax", "", lambda x: quaternion_apply(*x), True),
+        Contender("rotjax", "Rotation", lambda x: Rotation.from_quat(x[0]).apply(x[1]), True),
+    ]
+    for name, traceable in (("jax.scipy", True), ("scipy-jax", True), ("scipy", False)):
+        if name in p:
+            R = p[name]
+            out.append(Contender(name, "", lambda x, R=R: R.from_quat(x[0]).apply(x[1]), traceable))
+    if "jaxlie" in p:
+        SO3 = p["jaxlie"].SO3
+        fn = jax.vmap(lambda x: _jaxlie_apply(SO3, x))
+        out.append(Contender("jaxlie", "", lambda x: fn(_roll_quaternion_first(x)), True))
+    return ordered(out)
+
+
+def _jaxlie_apply(SO3, x):
+    return SO3(x[0]) @ x[1]
+
+
 # --- the registry ----------------------------------------------------------------------------
 
 CASES = {
@@ -374,6 +409,13 @@ CASES = {
             ),
             A.rotvec_to_quaternion_errors,
             jaxlie=_jaxlie_native(lambda SO3, v: SO3.exp(v).wxyz, _same),
+        ),
+        Case(
+            "quaternion_apply",
+            "quaternion_vector",
+            _apply_contenders,
+            A.quaternion_apply_errors,
+            jaxlie=_jaxlie_native(_jaxlie_apply, _roll_quaternion_first),
         ),
         Case(
             "integrate_angular_velocity",

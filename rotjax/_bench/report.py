@@ -41,6 +41,7 @@ HEADLINE_OPS = (
     "matrix_to_euler",
     "quaternion_to_rotvec",
     "rotvec_to_quaternion",
+    "quaternion_apply",
 )
 README_START, README_END = "<!-- headline:start -->", "<!-- headline:end -->"
 # Distinct per dtype, so that no two points of one contender share a marker.
