@@ -458,7 +458,7 @@ def test_accuracy_pass_every_operation(small_accuracy, op, method):
     batch = 256  # larger than the sets together (at most 34 rows here)
     rng = np.random.default_rng(0)
     x = C.INPUTS[case.input](rng, A.quats(rng, batch))
-    compiled = jax.jit(fn).lower(jnp.asarray(x)).compile()
+    compiled = jax.jit(fn).lower(jax.tree.map(jnp.asarray, x)).compile()
     padded = A.errors(case, fn, "rotjax", small_accuracy, jnp.float64, compiled, batch)
     apart = A.errors(case, fn, "rotjax", small_accuracy, jnp.float64)
     assert padded.keys() == apart.keys() and padded
