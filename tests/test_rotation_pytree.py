@@ -67,8 +67,7 @@ BUILDERS["setitem"] = _setitem
 def test_tree_structure_is_the_same_for_every_builder():
     ref = jax.tree_util.tree_structure(Rotation.identity(5))
     for name, build in BUILDERS.items():
-        # Traced, not run: structure and shape are fixed by tracing (and compiling each
-        # builder's operations eagerly took most of this test's time). Pickling needs values.
+        # Traced, not run (structure and shape are fixed by tracing); pickling needs values.
         r = build() if name == "pickle" else jax.eval_shape(build)
         assert r.shape == (5,), name
         assert jax.tree_util.tree_structure(r) == ref, name

@@ -254,16 +254,16 @@ class Evaluator:
         # Padding, slicing and casts in NumPy: as JAX ops, each new shape would compile.
         x = jax.tree.map(np.asarray, x)
         m = len(jax.tree.leaves(x)[0])
-        if self.compiled is not None and m <= self.batch:
+        padded = self.compiled is not None and m <= self.batch
+        if padded:
             x = jax.tree.map(
                 lambda v: np.concatenate(
                     [v, np.broadcast_to(v[:1], (self.batch - m, *v.shape[1:]))]
                 ),
                 x,
             )
-            out = self.compiled(jax.tree.map(lambda v: jnp.asarray(v, dtype=self.jnp_dtype), x))
-        else:
-            out = self.f_jit(jax.tree.map(lambda v: jnp.asarray(v, dtype=self.jnp_dtype), x))
+        x = jax.tree.map(lambda v: jnp.asarray(v, dtype=self.jnp_dtype), x)
+        out = self.compiled(x) if padded else self.f_jit(x)
         return np.asarray(out)[:m].astype(np.float64)
 
     def run_sets(self, sets):

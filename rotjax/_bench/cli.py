@@ -10,6 +10,8 @@ import sys
 import time
 from pathlib import Path
 
+from .cases import DTYPES
+
 DEFAULT_OUT = "bench_out"
 # With glibc's defaults, a buffer over 32 MiB (2^20 float32 matrices: 36 MiB) is mapped fresh and
 # returned to the system on every call, so every call pays page faults for its output; users
@@ -165,9 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--dtypes",
         default=None,
-        help="comma-separated subset of float32,float64,bfloat16,float16 (default: float32 and "
-        "float64, and the low-precision ones where an operation has them); --merge-into keeps "
-        "the other dtypes' rows",
+        help=f"comma-separated subset of {','.join(DTYPES)} (default: float32 and float64, and "
+        "the low-precision ones where an operation has them); --merge-into keeps the other "
+        "dtypes' rows",
     )
     p.add_argument(
         "--pin-malloc",
@@ -175,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
         help="glibc's mmap and trim thresholds at 1 GiB (default: glibc's defaults, as users run)",
     )
     args = p.parse_args(argv)
-    from .cases import CASES, DTYPES
+    from .cases import CASES
 
     unknown = sorted(set(args.ops.split(",") if args.ops else ()) - set(CASES))
     if unknown:
