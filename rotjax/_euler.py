@@ -10,7 +10,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._matrix import _selected_column
+from ._matrix import _column_coefficients, _selected_column
 from ._numerics import (
     as_float,
     check_shape,
@@ -428,13 +428,25 @@ def _quat_to_euler_jvp(seq, per_rotation, primals, tangents):
     return _quat_to_euler(q, seq, per_rotation), _contract(jac, dq)
 
 
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def _matrix_to_euler(R, seq):
-    # quaternion_to_euler's extraction of the Shepperd column: the angles do not depend on the
-    # quaternion's norm or sign, so the column needs no normalisation (NaN for a non-rotation,
-    # through its diagonal). JAX differentiates it: the derivative is the true one of the
-    # function computed, with quaternion_to_euler's rule (its exact derivative) inside.
+    """quaternion_to_euler's extraction of the Shepperd column: the angles do not depend on the
+    quaternion's norm or sign, so the column needs no normalisation (NaN for a non-rotation,
+    through its diagonal). The rule below is JAX's derivative of this code (tested)."""
     c, _ = _selected_column(R)
     return _quat_to_euler(jnp.stack(c, axis=-1), seq, True)
+
+
+@_matrix_to_euler.defjvp
+def _matrix_to_euler_jvp(seq, primals, tangents):
+    # The column's derivative, then quaternion_to_euler's rule (its exact derivative). The
+    # column is written once (the barrier): the rule's loops read it instead of each
+    # extracting it again from R.
+    (R,), (dR,) = primals, tangents
+    c, coef = _column_coefficients(R)
+    c = jax.lax.optimization_barrier(jnp.stack(c, axis=-1))
+    dc = jnp.stack([jnp.sum(m * dR, axis=(-2, -1)) for m in coef], axis=-1)
+    return jax.jvp(lambda c: _quat_to_euler(c, seq, True), (c,), (dc,))
 
 
 @public

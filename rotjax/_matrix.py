@@ -106,14 +106,15 @@ def _dk_pattern():
 _DK_PATTERN = _dk_pattern()
 
 
-def _shepperd_tangent(R, dR):
-    # JAX's derivative of _shepperd, term by term: r = s R (s a constant power of two),
-    # t = h rsqrt(h) with h = |r|^2 / 3, so dt = tau dh, tau = y (1 - h y^2 / 2), y = rsqrt(h)
-    # (rsqrt's rule); dc = dK e_i for the selected column i (the masks are constant);
-    # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc. dR enters only through
-    # u_a = sum(M_a * dR) with M_a = z s (dK[a, i] / dR + (2/3) tau r [a = i]), elementwise
-    # products whose transpose (reverse mode) is one loop writing the cotangent of R (slices
-    # of dR would transpose to nine pads, each evaluated for every entry).
+def _column_coefficients(R):
+    """The selected column ``c`` of the homogeneous ``K`` (as :func:`_selected_column`) and the
+    ``(..., 3, 3)`` coefficients ``M_a`` of its derivative, ``dc_a = sum(M_a * dR)``: JAX's
+    derivative of that code, term by term. ``r = s R`` (``s`` a constant power of two),
+    ``t = h rsqrt(h)`` with ``h = |r|^2 / 3``, so ``dt = tau dh``, ``tau = y (1 - h y^2 / 2)``,
+    ``y = rsqrt(h)`` (rsqrt's rule); ``dc = dK e_i`` for the selected column ``i`` (the masks
+    are constant): ``M_a = s (dK[a, i] / dR + (2/3) tau r [a = i])``. Elementwise products with
+    ``dR``, whose transpose (reverse mode) is one loop writing the cotangent of ``R`` (slices
+    of ``dR`` would transpose to nine pads, each evaluated for every entry)."""
     r, f2, ok, s = _prescaled(R)
     h = f2 / 3
     y = rsqrt(h)
@@ -122,14 +123,22 @@ def _shepperd_tangent(R, dR):
     sel = [use_x, ~use_x & use_y, ~use_x & ~use_y & use_z, ~use_x & ~use_y & ~use_z]
     sel = [b.astype(R.dtype)[..., None, None] for b in sel]
     c = [select(m, [col[a] for col in cols]) for a in range(4)]
+    s_ = s[..., None, None]
+    dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * (R * s_)
+    coef = [
+        s_ * (sum(sel[b] * like_rank(_DK_PATTERN[a, b], R) for b in range(4)) + sel[a] * dt)
+        for a in range(4)
+    ]
+    return c, coef
+
+
+def _shepperd_tangent(R, dR):
+    # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc.
+    c, coef = _column_coefficients(R)
     z = _hemisphere_scale(c, sum(x * x for x in c))
     q = [x * z for x in c]
-    zs = (z * s)[..., None, None]
-    dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * (R * s[..., None, None])
-    u = []
-    for a in range(4):
-        ma = sum(sel[b] * like_rank(_DK_PATTERN[a, b], R) for b in range(4)) + sel[a] * dt
-        u.append(jnp.sum((zs * ma) * dR, axis=(-2, -1)))
+    z_ = z[..., None, None]
+    u = [jnp.sum((z_ * m) * dR, axis=(-2, -1)) for m in coef]
     qu = sum(q[a] * u[a] for a in range(4))
     return jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
 
