@@ -420,7 +420,7 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula():
     assert np.all(np.isfinite(np.asarray(g)))
     scale = np.abs(np.asarray(g_ref)).max(axis=-1, keepdims=True)
     assert_close(g / scale, g_ref / scale, atol=1e-14)
-    hess, hess_ref = (jit(jax.hessian(g)) for g in (_quat_to_rotvec, _quat_to_rotvec.fun))
+    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (_quat_to_rotvec, _quat_to_rotvec.fun))
     for x in (q[-1] / jnp.linalg.norm(q[-1]), q[2], q[3]):  # generic, near identity, 180 degrees
         h, h_ref = hess(x), hess_ref(x)
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
