@@ -19,7 +19,7 @@ from ._numerics import (
     public,
     rsqrt,
 )
-from ._shepperd import entries, k4_columns, masks, select, select_column, stack_last
+from ._shepperd import column, entries, k4_columns, masks, select_column, stack_last
 
 METHODS = ("shepperd", "markley", "optimal")
 
@@ -48,15 +48,25 @@ def _prescaled(R, split=False):
     return r, f2, (f2 > 0) & (f2 < jnp.inf), s
 
 
-def _scaled_k(R, split=False):
-    """The columns of the homogeneous ``K`` (see :func:`rotjax._shepperd.k4_columns`) of the
-    prescaled ``R``, with ``t = |R|_F / sqrt(3)`` (1 for a rotation matrix, ``s`` for ``s``
-    times one), and the ``d`` terms. ``t`` is NaN for a zero or non-finite ``R``, and so is
-    every column :func:`rotjax._shepperd.select_column` returns (the NaN is put into the scale,
-    not into a copy of ``R``)."""
-    r, f2, ok, _ = _prescaled(R, split)
+def _homogeneous_k(R, split=False):
+    """The columns and diagonal of the homogeneous ``K`` (see
+    :func:`rotjax._shepperd.k4_columns`) of the prescaled ``R``, with ``t = |R|_F / sqrt(3)``
+    (1 for a rotation matrix, ``s`` for ``s`` times one) on the diagonal, and the scalars of
+    ``t``: ``h = |r|^2 / 3``, ``y = rsqrt(h)`` (``t = h y``) and the power of two ``s``. ``t``
+    is NaN for a zero or non-finite ``R``, and so is every column
+    :func:`rotjax._shepperd.select_column` returns (the NaN is put into the scale, not into a
+    copy of ``R``)."""
+    r, f2, ok, s = _prescaled(R, split)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
-    return k4_columns(r, jnp.where(ok, h * rsqrt(h), jnp.nan))
+    y = rsqrt(h)
+    cols, diag = k4_columns(r, jnp.where(ok, h * y, jnp.nan))
+    return cols, diag, (h, y, s)
+
+
+def _scaled_k(R, split=False):
+    """:func:`_homogeneous_k`'s columns and diagonal."""
+    cols, diag, _ = _homogeneous_k(R, split)
+    return cols, diag
 
 
 def _selected_column(R):
@@ -115,14 +125,11 @@ def _column_coefficients(R):
     are constant): ``M_a = s (dK[a, i] / dR + (2/3) tau r [a = i])``. Elementwise products with
     ``dR``, whose transpose (reverse mode) is one loop writing the cotangent of ``R`` (slices
     of ``dR`` would transpose to nine pads, each evaluated for every entry)."""
-    r, f2, ok, s = _prescaled(R)
-    h = f2 / 3
-    y = rsqrt(h)
-    cols, diag = k4_columns(r, jnp.where(ok, h * y, jnp.nan))
+    cols, diag, (h, y, s) = _homogeneous_k(R)
     use_x, use_y, use_z = m = masks(diag)
     sel = [use_x, ~use_x & use_y, ~use_x & ~use_y & use_z, ~use_x & ~use_y & ~use_z]
     sel = [b.astype(R.dtype)[..., None, None] for b in sel]
-    c = [select(m, [col[a] for col in cols]) for a in range(4)]
+    c = column(m, cols)
     s_ = s[..., None, None]
     dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * (R * s_)
     coef = [

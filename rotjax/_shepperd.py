@@ -64,12 +64,17 @@ def masks(diag):
     return (dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw
 
 
+def column(masks, cols):
+    """The column of ``cols`` that :func:`select` picks with ``masks``, as four per-rotation
+    arrays."""
+    return [select(masks, [col[i] for col in cols]) for i in range(4)]
+
+
 def select_column(cols, diag):
     """The column of ``K`` with the largest diagonal entry, as four per-rotation arrays, and its
     squared norm, at least ``t^2`` (the four diagonal entries of ``K`` sum to ``4 t``, so the
     largest is at least ``t``): no small divisor."""
-    m = masks(diag)
-    c = [select(m, [col[i] for col in cols]) for i in range(4)]
+    c = column(masks(diag), cols)
     return c, sum(x * x for x in c)
 
 

@@ -157,6 +157,16 @@ def rotjax_fn(name, method="", *args):
     return Contender("rotjax", method, lambda x: fn(x, *args, **kw), True)
 
 
+def _scipy_peers(peers, call):
+    """jax.scipy, scipy on JAX arrays and scipy on NumPy arrays, those in ``peers``, as
+    contenders ``x -> call(name, Rotation, x)``."""
+    return [
+        Contender(name, "", lambda x, name=name, R=peers[name]: call(name, R, x), traceable)
+        for name, traceable in (("jax.scipy", True), ("scipy-jax", True), ("scipy", False))
+        if name in peers
+    ]
+
+
 def scipy_like(peers, build: str, read: str, *args):
     """jax.scipy, scipy on JAX arrays and scipy on NumPy arrays as
     ``Rotation.<build>(x).<read>(*args)``.
@@ -165,20 +175,12 @@ def scipy_like(peers, build: str, read: str, *args):
     project either: its default projects by an SVD every matrix under ``jit``, and on NumPy
     arrays every matrix that is not orthogonal to within 1e-12 (every float32 matrix).
     """
-    out = []
-    for name, traceable in (("jax.scipy", True), ("scipy-jax", True), ("scipy", False)):
-        if name in peers:
-            R = peers[name]
-            kw = {"assume_valid": True} if name != "jax.scipy" and build == "from_matrix" else {}
-            out.append(
-                Contender(
-                    name,
-                    "",
-                    lambda x, R=R, kw=kw: getattr(getattr(R, build)(x, **kw), read)(*args),
-                    traceable,
-                )
-            )
-    return out
+
+    def call(name, R, x):
+        kw = {"assume_valid": True} if name != "jax.scipy" and build == "from_matrix" else {}
+        return getattr(getattr(R, build)(x, **kw), read)(*args)
+
+    return _scipy_peers(peers, call)
 
 
 def jaxlie_reader(peers, read):
@@ -318,10 +320,7 @@ def _apply_contenders(p):
         Contender("rotjax", "", lambda x: quaternion_apply(*x), True),
         Contender("rotjax", "Rotation", lambda x: Rotation.from_quat(x[0]).apply(x[1]), True),
     ]
-    for name, traceable in (("jax.scipy", True), ("scipy-jax", True), ("scipy", False)):
-        if name in p:
-            R = p[name]
-            out.append(Contender(name, "", lambda x, R=R: R.from_quat(x[0]).apply(x[1]), traceable))
+    out += _scipy_peers(p, lambda _, R, x: R.from_quat(x[0]).apply(x[1]))
     if "jaxlie" in p:
         SO3 = p["jaxlie"].SO3
         fn = jax.vmap(lambda x: _jaxlie_apply(SO3, x))
@@ -510,54 +509,48 @@ def _scipy_rigid(peers):
     return RigidTransform
 
 
-def _se3_exp_contenders(p):
+def _se3_contenders(p, op, build, read, jaxlie_call):
+    """rotjax's function ``op`` and its ``RigidTransform.<build>(x).<read>()``, jaxlie's
+    ``jaxlie_call(SE3, x)`` per transform, and scipy's ``RigidTransform.<build>(x).<read>()``."""
     from .. import RigidTransform
 
-    out = [
-        rotjax_fn("se3_exp"),
-        Contender(
-            "rotjax",
-            "RigidTransform",
-            lambda x: RigidTransform.from_exp_coords(x).as_matrix(),
-            True,
-        ),
-    ]
+    def via(cls):
+        return lambda x: getattr(getattr(cls, build)(x), read)()
+
+    out = [rotjax_fn(op), Contender("rotjax", "RigidTransform", via(RigidTransform), True)]
     if "jaxlie" in p:
         import jax
-        import jax.numpy as jnp
 
         SE3 = p["jaxlie"].SE3
-        fn = jax.vmap(lambda x: SE3.exp(jnp.roll(x, 3)).as_matrix())
-        out.append(Contender("jaxlie", "", fn, True))
+        out.append(Contender("jaxlie", "", jax.vmap(lambda x: jaxlie_call(SE3, x)), True))
     S = _scipy_rigid(p)
     if S is not None:
-        out.append(Contender("scipy", "", lambda x: S.from_exp_coords(x).as_matrix(), False))
+        out.append(Contender("scipy", "", via(S), False))
     return ordered(out)
+
+
+def _se3_exp_contenders(p):
+    import jax.numpy as jnp
+
+    return _se3_contenders(
+        p,
+        "se3_exp",
+        "from_exp_coords",
+        "as_matrix",
+        lambda SE3, x: SE3.exp(jnp.roll(x, 3)).as_matrix(),
+    )
 
 
 def _se3_log_contenders(p):
-    from .. import RigidTransform
+    import jax.numpy as jnp
 
-    out = [
-        rotjax_fn("se3_log"),
-        Contender(
-            "rotjax",
-            "RigidTransform",
-            lambda x: RigidTransform.from_matrix(x).as_exp_coords(),
-            True,
-        ),
-    ]
-    if "jaxlie" in p:
-        import jax
-        import jax.numpy as jnp
-
-        SE3 = p["jaxlie"].SE3
-        fn = jax.vmap(lambda T: jnp.roll(SE3.from_matrix(T).log(), 3))
-        out.append(Contender("jaxlie", "", fn, True))
-    S = _scipy_rigid(p)
-    if S is not None:
-        out.append(Contender("scipy", "", lambda x: S.from_matrix(x).as_exp_coords(), False))
-    return ordered(out)
+    return _se3_contenders(
+        p,
+        "se3_log",
+        "from_matrix",
+        "as_exp_coords",
+        lambda SE3, T: jnp.roll(SE3.from_matrix(T).log(), 3),
+    )
 
 
 def _rigid_apply_contenders(p):
