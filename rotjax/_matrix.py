@@ -63,15 +63,10 @@ def _homogeneous_k(R, split=False):
     return cols, diag, (h, y, s)
 
 
-def _scaled_k(R, split=False):
-    """:func:`_homogeneous_k`'s columns and diagonal."""
-    cols, diag, _ = _homogeneous_k(R, split)
-    return cols, diag
-
-
 def _selected_column(R):
     """:func:`rotjax._shepperd.select_column` of the prescaled, homogeneous ``K`` of ``R``."""
-    return select_column(*_scaled_k(R))
+    cols, diag, _ = _homogeneous_k(R)
+    return select_column(cols, diag)
 
 
 def _hemisphere_scale(v, sq):
@@ -169,7 +164,7 @@ def _markley(R):
     expressions throughout, as in `_shepperd` (the Shepperd quaternion is not stacked
     and unstacked in between: that cost a transposing loop).
     """
-    cols, diag = _scaled_k(R, split=True)
+    cols, diag, _ = _homogeneous_k(R, split=True)
     c, sq = select_column(cols, diag)
     s0 = _hemisphere_scale(c, sq)
     v = _k_times(cols, [x * s0 for x in c])

@@ -64,10 +64,10 @@ def masks(diag):
     return (dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw
 
 
-def column(masks, cols):
-    """The column of ``cols`` that :func:`select` picks with ``masks``, as four per-rotation
-    arrays."""
-    return [select(masks, [col[i] for col in cols]) for i in range(4)]
+def column(m, cols):
+    """The column of ``cols`` that :func:`select` picks with the masks ``m`` (see
+    :func:`masks`), as four per-rotation arrays."""
+    return [select(m, [col[i] for col in cols]) for i in range(4)]
 
 
 def select_column(cols, diag):

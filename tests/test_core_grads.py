@@ -508,7 +508,9 @@ def test_matrix_to_euler_rule_equals_autodiff_of_its_formula(seq):
     R = np.concatenate([R, R + 1e-3 * rng.normal(size=R.shape), rng.normal(size=(6, 3, 3))])
     R = jnp.asarray(R * np.exp(rng.uniform(-46, 46, size=(len(R), 1, 1))))
     dR = jnp.asarray(rng.normal(size=R.shape)) * jnp.abs(R).max(axis=(-2, -1), keepdims=True)
-    out = _assert_rule_equals_autodiff(_matrix_to_euler, seq, R, dR, rng, True, min_same=0.85)
+    out = _assert_rule_equals_autodiff(
+        _matrix_to_euler, seq, R, dR, rng, compiled=True, min_same=0.85
+    )
     assert_close(angle_diff(out, rj.matrix_to_euler(R, seq)), 0, atol=1e-15)  # the forward's
 
 
