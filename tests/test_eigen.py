@@ -339,20 +339,26 @@ def test_jacobi_rotation_with_a_tiny_off_diagonal(dtype):
     assert (alpha >= beta * (1 - 4 * np.finfo(dtype).eps)).all()
 
 
-def test_gimbal_lock_matrices_in_a_batch():
-    """The benchmark's gimbal-lock rotations (every sequence, float32): exact to a few eps in a
-    batch, where XLA's vectorised loops round differently from a single matrix."""
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_exact_rotations_with_ties_in_a_batch(dtype):
+    """The benchmark's gimbal-lock and tied rotations (every sequence): exact to a few eps in a
+    batch, where XLA:CPU's loops round differently from a single matrix, and with the quaternion
+    turned back into a matrix in the same program. The Shepperd column is chosen at a tie of
+    diagonal entries there, and a choice made again in each loop that reads it (rounded
+    differently) mixed two columns into an orthogonal quaternion."""
     from rotjax._bench import accuracy as A
     from rotjax._bench.runner import SEQS
 
-    acc = A.Accuracy(np.random.default_rng(99), 96, 8, "float32", SEQS)
-    M = np.asarray(acc.msets["gimbal"]).astype(np.float32)
-    for f in (
-        lambda R: rj.quaternion_to_matrix(rj.matrix_to_quaternion(R, method="optimal")),
-        lambda R: rj.nined_to_matrix(R.reshape(-1, 9)),
-    ):
-        out = np.asarray(jax.jit(f)(M), np.float64)
-        assert np.abs(out - M.astype(np.float64)).max() <= 8 * np.finfo(np.float32).eps
+    acc = A.Accuracy(np.random.default_rng(99), 96, 8, dtype, SEQS)
+    eps = np.finfo(dtype).eps
+    for name in ("gimbal", "ties", "exact_180"):
+        M = np.asarray(acc.msets[name])
+        for f in (
+            lambda R: rj.quaternion_to_matrix(rj.matrix_to_quaternion(R, method="optimal")),
+            lambda R: rj.nined_to_matrix(R.reshape(-1, 9)),
+        ):
+            out = np.asarray(jax.jit(f)(M), np.float64)
+            assert np.abs(out - M.astype(np.float64)).max() <= 8 * eps, name
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
