@@ -23,7 +23,8 @@ method of the public classes; Google style, rendered by mkdocstrings):
 * Cross-references in Markdown, `` [`quaternion_to_matrix`][rotjax.quaternion_to_matrix] ``,
   code in single backticks: no reST roles (`:func:`, `:class:`, ...) and no double backticks.
 
-The check fails on a reST role in a public docstring or a docs page, a double-backtick span
+The check fails on a reST role in a public docstring or a docs page, on install commands of the
+docs' home page that differ from the README's two, a double-backtick span
 in a public docstring, a Returns type that is not a type expression, a missing Returns or
 Examples section or annotation, or a warning from the docstring parser.
 Usage, from the repository root: `python .ci/doc_examples.py [FILE ...]` (no FILE: the
@@ -215,12 +216,21 @@ def check_docstrings() -> list[str]:
     return errors
 
 
+def install_commands(path: Path) -> list[str]:
+    """The `pip install ...` command lines of a page."""
+    return [ln.strip() for ln in path.read_text().splitlines() if ln.startswith("pip install -e")]
+
+
 def check_pages(files: list[Path]) -> list[str]:
     errors = []
     for p in files:
         for i, line in enumerate(p.read_text().splitlines(), 1):
             if ROLE.search(line):
                 errors.append(f"{p}:{i}: reST role {ROLE.search(line).group(0)!r}")
+    # The docs' home page repeats the README's two commands: they must not drift apart.
+    readme, home = install_commands(Path("README.md"))[:2], install_commands(Path("docs/index.md"))
+    if home[:2] != readme:
+        errors.append(f"docs/index.md: install commands {home[:2]} differ from README's {readme}")
     return errors
 
 
