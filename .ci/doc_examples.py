@@ -227,11 +227,15 @@ def check_pages(files: list[Path]) -> list[str]:
         for i, line in enumerate(p.read_text().splitlines(), 1):
             if ROLE.search(line):
                 errors.append(f"{p}:{i}: reST role {ROLE.search(line).group(0)!r}")
-    # The docs' home page repeats the README's two commands: they must not drift apart.
+    return errors
+
+
+def check_install_commands() -> list[str]:
+    """The docs' home page repeats the README's two commands: they must not drift apart."""
     readme, home = install_commands(Path("README.md"))[:2], install_commands(Path("docs/index.md"))
     if home[:2] != readme:
-        errors.append(f"docs/index.md: install commands {home[:2]} differ from README's {readme}")
-    return errors
+        return [f"docs/index.md: install commands {home[:2]} differ from README's {readme}"]
+    return []
 
 
 def run_docstrings() -> int:
@@ -254,7 +258,7 @@ def main(argv: list[str]) -> int:
         return 1 if run_file(Path(argv[0])) else 0
     pages = [Path("README.md"), *sorted(Path("docs").rglob("*.md"))]
     files = [Path(p) for p in argv] or pages
-    errors = [] if argv else check_pages(pages) + check_docstrings()
+    errors = [] if argv else check_pages(pages) + check_install_commands() + check_docstrings()
     for e in errors:
         print(f"DOCS CHECK: {e}", file=sys.stderr)
     runs = [[str(p)] for p in files if BLOCK.search(p.read_text())]

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 
 from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div, select
 from ._quaternion import _multiply, _to_matrix
-from ._shepperd import column, k4_columns, stack_last
+from ._shepperd import k4_columns, masks_once, select_column, stack_last
 
 # One-sided Jacobi converges quadratically (Hestenes 1958; Demmel & Veselic 1992). The sweep
 # counts are the fewest that orthogonalise the columns to the rounding level for every matrix
@@ -217,13 +217,10 @@ def _polar(B, nan_at_zero=True):
     # largest diagonal (at least 1 for a rotation, so |c|^2 >= 4 is in rsqrt's domain),
     # normalised to w >= 0. Within rounding of 180 degrees (|w| <= 4 eps) the selected
     # component is positive instead, so that rounding of the input cannot flip the result.
-    # The column is chosen once, by an argmax (a loop of its own): XLA:CPU recomputes Q's
-    # entries in each loop that reads them, rounded differently, and at a tie of diagonal
-    # entries (exact rotations at 90 degrees) comparisons made again there mixed two columns.
-    cols, diag = k4_columns([x for row in q_entries for x in row])
-    k = jnp.argmax(jnp.stack(diag, axis=-1), axis=-1)
-    c = column((k == 0, k == 1, k == 2), cols)
-    n = sum(x * x for x in c)
+    # Q's entries are rounded products, so the column is chosen once (masks_once): at a tie
+    # (exact rotations at 90 degrees) choices made again in each loop mixed two columns.
+    entries = [x for row in q_entries for x in row]
+    c, n = select_column(*k4_columns(entries), pick=masks_once)
     flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
     inv = rsqrt(n)
     q = stack_last(c, jnp.where(flip, -inv, inv))

@@ -59,9 +59,22 @@ def select(masks, vals):
 
 
 def masks(diag):
-    """``(use_x, use_y, use_z)`` for :func:`select`: the largest diagonal entry of ``K``."""
+    """``(use_x, use_y, use_z)`` for :func:`select`: the largest diagonal entry of ``K``.
+
+    Comparisons fuse into every loop that reads the selected column, and each loop makes them
+    again. That is safe where ``diag`` is exact arithmetic on the input (the conversions: the
+    same bits in every loop); for computed entries use :func:`masks_once`."""
     dx, dy, dz, dw = diag
     return (dx >= dy) & (dx >= dz) & (dx >= dw), (dy >= dz) & (dy >= dw), dz >= dw
+
+
+def masks_once(diag):
+    """:func:`masks` from one argmax (the same first-largest choice), which XLA:CPU computes in
+    a loop of its own. For a ``diag`` computed from rounded products: XLA recomputes such
+    values in each loop that reads them, contracted into FMAs differently, and at a tie
+    comparisons made again there can pick different columns for different components."""
+    k = jnp.argmax(jnp.stack(diag, axis=-1), axis=-1)
+    return k == 0, k == 1, k == 2
 
 
 def column(m, cols):
@@ -70,11 +83,12 @@ def column(m, cols):
     return [select(m, [col[i] for col in cols]) for i in range(4)]
 
 
-def select_column(cols, diag):
+def select_column(cols, diag, pick=masks):
     """The column of ``K`` with the largest diagonal entry, as four per-rotation arrays, and its
     squared norm, at least ``t^2`` (the four diagonal entries of ``K`` sum to ``4 t``, so the
-    largest is at least ``t``): no small divisor."""
-    c = column(masks(diag), cols)
+    largest is at least ``t``): no small divisor. ``pick``: :func:`masks` or
+    :func:`masks_once`."""
+    c = column(pick(diag), cols)
     return c, sum(x * x for x in c)
 
 
