@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from ._numerics import pairwise_sum
+
 
 def entries(R):
     """The nine entries of a ``(..., 3, 3)`` matrix, row by row, as per-rotation arrays."""
@@ -89,7 +91,7 @@ def select_column(cols, diag, pick=masks):
     largest is at least ``t``): no small divisor. ``pick``: :func:`masks` or
     :func:`masks_once`."""
     c = column(pick(diag), cols)
-    return c, sum(x * x for x in c)
+    return c, pairwise_sum(x * x for x in c)
 
 
 def stack_last(v, scale):
