@@ -292,6 +292,21 @@ def test_copy_baseline_at_a_bandwidth_bound_batch(tmp_path):
     pytest.fail(f"vs_copy out of [0.05, 1.5] in three runs: {missed}")
 
 
+def test_interleaved_rounds_vary_each_contenders_predecessor(monkeypatch):
+    """Every contender runs once per round, and not always right after the same one: a call's
+    time depends on what ran before it (a large buffer just freed), which a fixed or rotated
+    order would charge to the same contender every round."""
+    from rotjax._bench import timing as T
+
+    calls = []
+    monkeypatch.setattr(T, "timed", lambda f, x: calls.append(f) or 1e-3)
+    keys = [f"c{i}" for i in range(14)]
+    times = T.throughput_group({k: (k, None) for k in keys}, rounds=9)
+    assert all(sorted(times[k]) == list(range(9)) for k in keys)
+    before = {k: {calls[i - 1] for i in range(1, len(calls)) if calls[i] == k} for k in keys}
+    assert all(len(b) >= 3 for b in before.values()), before
+
+
 def test_copy_kernel_reads_every_input_and_writes_the_output_width():
     from rotjax._bench.timing import copy_kernel
 

@@ -1,12 +1,13 @@
 """Timing: interleaved rounds over the contenders of one group, medians of per-round ratios.
 
 Every contender of an operation and dtype (and the copy kernel, and the gradients) runs once
-per round, in an order rotated every round; ratios are medians over rounds of per-round
+per round, in an order shuffled every round; ratios are medians over rounds of per-round
 ratios, which cancel most of the drift of a shared or throttled machine.
 """
 
 from __future__ import annotations
 
+import random
 import statistics
 import time
 
@@ -44,19 +45,24 @@ def timed(f, x):
     return time.perf_counter() - t
 
 
-def throughput_group(entries, rounds, slow_s=1.0, slow_rounds=7):
+def throughput_group(entries, rounds, slow_s=1.0, slow_rounds=7, seed=0):
     """Interleaved rounds over every contender; returns ``{key: {round: seconds}}``.
 
-    ``entries``: ``{key: (callable, input)}``. The order is rotated every round so that no
-    contender always runs right after the same neighbour. A contender slower than ``slow_s`` per
-    call (an eigendecomposition per matrix, say) sits out after ``slow_rounds`` rounds; its
-    ratios are then medians over the rounds it ran in: seven by default, which take about as
-    long as a burst of a shared machine (10-20 s), so that one burst rarely decides the median.
+    ``entries``: ``{key: (callable, input)}``. The order is shuffled every round (seeded), so
+    that no contender always runs right after the same neighbour: a call's time depends on
+    what ran before it (the allocator's state after a large gradient buffer was freed, say),
+    and a fixed or merely rotated order would charge that to the same contender every round.
+    A contender slower than ``slow_s`` per call (an eigendecomposition per matrix, say) sits
+    out after ``slow_rounds`` rounds; its ratios are then medians over the rounds it ran in:
+    seven by default, which take about as long as a burst of a shared machine (10-20 s), so
+    that one burst rarely decides the median.
     """
     keys = list(entries)
     times = {k: {} for k in keys}
+    shuffle = random.Random(seed).shuffle
     for r in range(rounds):
-        order = keys[r % len(keys) :] + keys[: r % len(keys)]
+        order = keys[:]
+        shuffle(order)
         for k in order:
             if r >= slow_rounds and statistics.median(times[k].values()) > slow_s:
                 continue
