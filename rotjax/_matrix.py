@@ -16,9 +16,9 @@ from ._numerics import (
     from_scalar_last,
     like_rank,
     max_abs,
-    pairwise_sum,
     public,
     rsqrt,
+    sum_squares,
 )
 from ._shepperd import column, entries, k4_columns, masks, select_column, stack_last
 
@@ -45,7 +45,7 @@ def _prescaled(R, split=False):
     # enough to be inlined into the vectorised loop in float64 too.
     s, _ = exponent_scale(jax.lax.stop_gradient(max_abs(*r)))
     r = [x * s for x in r]
-    f2 = pairwise_sum(x * x for x in r)
+    f2 = sum_squares(r)
     return r, f2, (f2 > 0) & (f2 < jnp.inf), s
 
 
@@ -138,7 +138,7 @@ def _column_coefficients(R):
 def _shepperd_tangent(R, dR):
     # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc.
     c, coef = _column_coefficients(R)
-    z = _hemisphere_scale(c, pairwise_sum(x * x for x in c))
+    z = _hemisphere_scale(c, sum_squares(c))
     q = [x * z for x in c]
     z_ = z[..., None, None]
     u = [jnp.sum((z_ * m) * dR, axis=(-2, -1)) for m in coef]
@@ -169,7 +169,7 @@ def _markley(R):
     c, sq = select_column(cols, diag)
     s0 = _hemisphere_scale(c, sq)
     v = _k_times(cols, [x * s0 for x in c])
-    return stack_last(v, _hemisphere_scale(v, pairwise_sum(x * x for x in v)))
+    return stack_last(v, _hemisphere_scale(v, sum_squares(v)))
 
 
 def _from_matrix(R, method: str):

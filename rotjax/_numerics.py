@@ -187,9 +187,10 @@ def pairwise(op, xs):
     return xs[0]
 
 
-def pairwise_sum(xs):
-    """Sum of per-element arrays in a balanced tree (see :func:`pairwise`)."""
-    return pairwise(jnp.add, xs)
+def sum_squares(xs):
+    """``sum(x * x for x in xs)`` over per-element arrays (the components of a vector, the
+    entries of a matrix), added in a balanced tree (see :func:`pairwise`)."""
+    return pairwise(jnp.add, (x * x for x in xs))
 
 
 def max_abs(*xs):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._numerics import pairwise_sum
+from ._numerics import sum_squares
 
 
 def entries(R):
@@ -91,7 +91,7 @@ def select_column(cols, diag, pick=masks):
     largest is at least ``t``): no small divisor. ``pick``: :func:`masks` or
     :func:`masks_once`."""
     c = column(pick(diag), cols)
-    return c, pairwise_sum(x * x for x in c)
+    return c, sum_squares(c)
 
 
 def stack_last(v, scale):
