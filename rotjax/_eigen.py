@@ -29,9 +29,9 @@ import math
 import jax
 import jax.numpy as jnp
 
-from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div, select
+from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div, select, stack_scaled
 from ._quaternion import _multiply, _to_matrix
-from ._shepperd import k4_columns, masks_once, select_column, stack_last
+from ._shepperd import k4_columns, masks_once, select_column
 
 # One-sided Jacobi converges quadratically (Hestenes 1958; Demmel & Veselic 1992). The sweep
 # counts are the fewest that orthogonalise the columns to the rounding level for every matrix
@@ -223,7 +223,7 @@ def _polar(B, nan_at_zero=True):
     c, n = select_column(*k4_columns(entries), pick=masks_once)
     flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
     inv = rsqrt(n)
-    q = stack_last(c, jnp.where(flip, -inv, inv))
+    q = stack_scaled(c, jnp.where(flip, -inv, inv))
     s = jnp.stack([_dot3(ua, wa), _dot3(ub, wb), _dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)
 

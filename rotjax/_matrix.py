@@ -18,9 +18,10 @@ from ._numerics import (
     max_abs,
     public,
     rsqrt,
+    stack_scaled,
     sum_squares,
 )
-from ._shepperd import column, entries, k4_columns, masks, select_column, stack_last
+from ._shepperd import column, entries, k4_columns, masks, select_column
 
 METHODS = ("shepperd", "markley", "optimal")
 
@@ -93,7 +94,7 @@ def _shepperd(R):
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
-    return stack_last(c, _hemisphere_scale(c, sq))
+    return stack_scaled(c, _hemisphere_scale(c, sq))
 
 
 def _dk_pattern():
@@ -169,7 +170,7 @@ def _markley(R):
     c, sq = select_column(cols, diag)
     s0 = _hemisphere_scale(c, sq)
     v = _k_times(cols, [x * s0 for x in c])
-    return stack_last(v, _hemisphere_scale(v, sum_squares(v)))
+    return stack_scaled(v, _hemisphere_scale(v, sum_squares(v)))
 
 
 def _from_matrix(R, method: str):

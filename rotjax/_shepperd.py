@@ -92,11 +92,3 @@ def select_column(cols, diag, pick=masks):
     :func:`masks_once`."""
     c = column(pick(diag), cols)
     return c, sum_squares(c)
-
-
-def stack_last(v, scale):
-    """``(..., 4)`` from four per-rotation components times a per-rotation scale.
-
-    Stacked on a leading axis and moved last: XLA:CPU emits one transposing loop.
-    """
-    return jnp.moveaxis(jnp.stack(v, axis=0) * scale[None], 0, -1)
