@@ -17,7 +17,7 @@ from ._numerics import (
     select,
     to_scalar_last,
 )
-from ._quaternion import _prescaled_parts, _stack
+from ._quaternion import _scaled_vector_part
 
 
 @public
@@ -49,12 +49,15 @@ def quaternion_to_mrp(q: ArrayLike, scalar_first: bool = False) -> Array:
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     # Any finite scale: |q|^2 stays in range; NaN for the zero quaternion or a non-finite one.
-    (x, y, z, w), _ = _prescaled_parts(to_scalar_last(q, scalar_first))
-    n2 = x * x + y * y + z * z + w * w
+    return _scaled_vector_part(to_scalar_last(q, scalar_first), _mrp_scale, True).astype(dt)
+
+
+def _mrp_scale(n2, w):
+    """``k = sign(w) / (|q| + |w|)`` from ``n2 = |q|^2`` and ``w`` of a prescaled quaternion:
+    the MRP is ``k q_v``."""
     s = select(w < 0, -1.0, 1.0, w.dtype)
     d = n2 * rsqrt(n2) + s * w  # |q| + |w|, at least |q| >= 1/2: rsqrt's domain when squared
-    k = s * rsqrt(d * d)
-    return _stack([k * x, k * y, k * z]).astype(dt)
+    return s * rsqrt(d * d)
 
 
 @public

@@ -22,10 +22,9 @@ from ._numerics import (
     rsqrt,
     safe_norm,
     select,
-    stack_scaled,
     to_scalar_last,
 )
-from ._quaternion import _angle, _prescaled, _prescaled_parts, _stack
+from ._quaternion import _angle, _prescaled, _scaled_vector_part
 
 
 def _small(x2):
@@ -171,41 +170,10 @@ def _rotvec_scale(n2, w):
     return (2 * sign) * inv_m * half
 
 
-@jax.custom_jvp
 def _quat_to_rotvec(q):
     """Logarithm map of a scalar-last quaternion of any finite non-zero norm; angle in
-    [0, pi] (see `_rotvec_scale`); every step a per-rotation scalar expression, and `k`
-    applied to the stacked vector part (:func:`rotjax._numerics.stack_scaled`): one
-    vectorised loop."""
-    (x, y, z, w), _ = _prescaled_parts(q)  # NaN for the zero quaternion or a non-finite one
-    return stack_scaled([x, y, z], _rotvec_scale(x * x + y * y + z * z, w))
-
-
-@_quat_to_rotvec.defjvp
-def _quat_to_rotvec_jvp(primals, tangents):
-    # JAX's derivative of the code above, grouped: with the prescaled components (s a constant
-    # power of two), d(k v) = k dv + v dk, dk = 2 k_n2 (v . dv) + k_w dw, where k_n2 and k_w
-    # are JAX's derivatives of _rotvec_scale (forward mode, per rotation).
-    # Written for reverse mode, whose transpose must again be one vectorised loop (see
-    # stack_scaled): the tangent is read as the rows of dq moved to a leading axis, and each
-    # long per-rotation factor (k s, k_n2, k_w) multiplies whole rows rather than sitting in
-    # a stacked part. `v dk` is stacked part by part, so that dk's transpose is a sum of three
-    # products (a sum over the stacked axis would be a reduction: a loop of its own).
-    (q,), (dq,) = primals, tangents
-    (x, y, z, w), s = _prescaled_parts(q)  # read once: the value is the forward's, from k
-    n2 = x * x + y * y + z * z
-    k, k_n2 = jax.jvp(_rotvec_scale, (n2, w), (jnp.ones_like(n2), jnp.zeros_like(w)))
-    _, k_w = jax.jvp(_rotvec_scale, (n2, w), (jnp.zeros_like(n2), jnp.ones_like(w)))
-    d = jnp.moveaxis(dq, -1, 0)
-    row = jax.lax.broadcasted_iota(jnp.int32, (4,) + (1,) * (d.ndim - 1), 0)
-    v = jnp.stack([x, y, z, jnp.zeros_like(x)], axis=0)
-    dk = (2 * k_n2 * s) * jnp.sum(v * d, axis=0) + (k_w * s) * jnp.sum(
-        jnp.where(row == 3, d, 0.0), axis=0
-    )
-    rows = jnp.where(row < 3, (k * s)[None] * d, 0.0) + jnp.stack(
-        [x * dk, y * dk, z * dk, jnp.zeros_like(dk)], axis=0
-    )
-    return stack_scaled([x, y, z], k), jnp.moveaxis(rows[:3], 0, -1)
+    [0, pi] (see `_rotvec_scale`): one vectorised loop, forward and reverse."""
+    return _scaled_vector_part(q, _rotvec_scale, False)
 
 
 @public

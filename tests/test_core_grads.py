@@ -393,12 +393,23 @@ def test_shepperd_hand_written_derivative_equals_autodiff_of_its_formula(which):
     assert_close(g / scale, g_ref / scale, atol=1e-14)
 
 
-def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula():
-    """quaternion_to_rotvec's custom jvp (and its transpose, and second derivatives) equals JAX's
-    own derivative of the forward code, and the rule of its polynomial that of JAX on the
-    polynomial: quaternions of norms 1e-20 to 1e20, identity and near it, 180 degrees, both
-    signs of w, and n = |w| (the switch between the two atan forms)."""
-    from rotjax._rotvec import _atan_ratio, _quat_to_rotvec
+@pytest.mark.parametrize("which", ["rotvec", "mrp"])
+def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
+    """The custom jvp of quaternion_to_rotvec and quaternion_to_mrp (one rule, for `k q_v`;
+    and its transpose, and second derivatives) equals JAX's own derivative of the forward
+    code, and the rule of the rotvec's polynomial that of JAX on the polynomial: quaternions
+    of norms 1e-20 to 1e20, identity and near it, 180 degrees, both signs of w, and n = |w|
+    (the switch between the two atan forms)."""
+    from rotjax._mrp import _mrp_scale
+    from rotjax._quaternion import _scaled_vector_part
+    from rotjax._rotvec import _atan_ratio, _rotvec_scale
+
+    k_of, with_w = {"rotvec": (_rotvec_scale, False), "mrp": (_mrp_scale, True)}[which]
+
+    def _quat_to_rotvec(q):
+        return _scaled_vector_part(q, k_of, with_w)
+
+    _quat_to_rotvec.fun = lambda q: _scaled_vector_part.fun(q, k_of, with_w)
 
     rng = np.random.default_rng(23)
     special = [
