@@ -47,7 +47,7 @@ CASES = {
         rj.quaternion_to_rotvec, [(4,)], (1, BYTES_SLACK, 130), (1, BYTES_SLACK, 260)
     ),
     "quaternion_apply": (
-        rj.quaternion_apply, [(4,), (3,)], (1, BYTES_SLACK, 100), (1, BYTES_SLACK, 170)
+        rj.quaternion_apply, [(4,), (3,)], (1, BYTES_SLACK, 100), (1, BYTES_SLACK, 200)
     ),
     "quaternion_to_mrp": (
         rj.quaternion_to_mrp, [(4,)], (1, BYTES_SLACK, 100), (1, BYTES_SLACK, 150)
@@ -55,10 +55,8 @@ CASES = {
     "quaternion_inverse": (
         rj.quaternion_inverse, [(4,)], (1, BYTES_SLACK, 75), (1, BYTES_SLACK, 115)
     ),
-    # One loop that reads the vector in two expressions (its norm from the three components,
-    # then one broadcast product), which cost_analysis counts as two reads.
     "rotvec_to_quaternion": (
-        rj.rotvec_to_quaternion, [(3,)], (1, 1.45, 115), (2, 1.9, 240)
+        rj.rotvec_to_quaternion, [(3,)], (1, BYTES_SLACK, 115), (1, BYTES_SLACK, 210)
     ),
 }  # fmt: skip
 
