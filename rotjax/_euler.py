@@ -10,7 +10,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._matrix import _column_coefficients, _selected_column
+from ._matrix import _column_tangent, _selected_column
 from ._numerics import (
     as_float,
     check_shape,
@@ -443,9 +443,9 @@ def _matrix_to_euler_jvp(seq, primals, tangents):
     # column is written once (the barrier): the rule's loops read it instead of each
     # extracting it again from R.
     (R,), (dR,) = primals, tangents
-    c, coef = _column_coefficients(R)
+    c, dc = _column_tangent(R, dR)
     c = jax.lax.optimization_barrier(jnp.stack(c, axis=-1))
-    dc = jnp.stack([jnp.sum(m * dR, axis=(-2, -1)) for m in coef], axis=-1)
+    dc = jnp.stack(dc, axis=-1)
     return jax.jvp(lambda c: _quat_to_euler(c, seq, True), (c,), (dc,))
 
 

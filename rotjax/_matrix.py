@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
@@ -14,13 +13,13 @@ from ._numerics import (
     check_shape,
     exponent_scale,
     from_scalar_last,
-    like_rank,
     max_abs,
     public,
     rsqrt,
     stack_scaled,
     sum_squares,
 )
+from ._quaternion import _components
 from ._shepperd import column, entries, k4_columns, masks, select_column
 
 METHODS = ("shepperd", "markley", "optimal")
@@ -97,52 +96,31 @@ def _shepperd(R):
     return stack_scaled(c, _hemisphere_scale(c, sq))
 
 
-def _dk_pattern():
-    """``P[a, b, k, j]``: the derivative of ``K[a, b]`` with respect to ``R[k, j]`` (``K`` is
-    affine in ``R``; read off :func:`rotjax._shepperd.k4_columns` on unit matrices, in NumPy)."""
-    out = np.zeros((4, 4, 3, 3))
-    for k in range(3):
-        for j in range(3):
-            e = np.zeros((3, 3))
-            e[k, j] = 1.0
-            cols, _ = k4_columns(entries(e), 0.0)
-            out[:, :, k, j] = np.array(cols).T
-    return out
-
-
-_DK_PATTERN = _dk_pattern()
-
-
-def _column_coefficients(R):
-    """The selected column ``c`` of the homogeneous ``K`` (as :func:`_selected_column`) and the
-    ``(..., 3, 3)`` coefficients ``M_a`` of its derivative, ``dc_a = sum(M_a * dR)``: JAX's
-    derivative of that code, term by term. ``r = s R`` (``s`` a constant power of two),
-    ``t = h rsqrt(h)`` with ``h = |r|^2 / 3``, so ``dt = tau dh``, ``tau = y (1 - h y^2 / 2)``,
-    ``y = rsqrt(h)`` (rsqrt's rule); ``dc = dK e_i`` for the selected column ``i`` (the masks
-    are constant): ``M_a = s (dK[a, i] / dR + (2/3) tau r [a = i])``. Elementwise products with
-    ``dR``, whose transpose (reverse mode) is one loop writing the cotangent of ``R`` (slices
-    of ``dR`` would transpose to nine pads, each evaluated for every entry)."""
+def _column_tangent(R, dR):
+    """The selected column ``c`` of the homogeneous ``K`` (as :func:`_selected_column`) and its
+    tangent ``dc``: JAX's derivative of that code, term by term. ``r = s R`` (``s`` a constant
+    power of two), ``t = h rsqrt(h)`` with ``h = |r|^2 / 3``, so ``dt = tau dh``,
+    ``tau = y (1 - h y^2 / 2)``, ``y = rsqrt(h)`` (rsqrt's rule); ``K`` is affine in ``R``
+    and the masks are constant, so ``dc`` is the selected column of ``K``'s own formula on
+    ``s dR``, with ``dt`` for ``t``. The entries of ``dR`` are read by
+    :func:`rotjax._quaternion._components`: in reverse mode the cotangent of ``R`` is then
+    written by one loop from per-rotation expressions (slices of ``dR`` would transpose to
+    nine pads, each evaluated for every entry)."""
     cols, diag, (h, y, s) = _homogeneous_k(R)
-    use_x, use_y, use_z = m = masks(diag)
-    sel = [use_x, ~use_x & use_y, ~use_x & ~use_y & use_z, ~use_x & ~use_y & ~use_z]
-    sel = [b.astype(R.dtype)[..., None, None] for b in sel]
-    c = column(m, cols)
-    s_ = s[..., None, None]
-    dt = ((2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y))[..., None, None] * (R * s_)
-    coef = [
-        s_ * (sum(sel[b] * like_rank(_DK_PATTERN[a, b], R) for b in range(4)) + sel[a] * dt)
-        for a in range(4)
-    ]
-    return c, coef
+    m = masks(diag)
+    d = _components(dR.reshape(*dR.shape[:-2], 9))
+    r_dr = sum((x * s) * e for x, e in zip(entries(R), d, strict=True))  # r . dR (unscaled)
+    dt = (2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y) * r_dr
+    dcols, _ = k4_columns(d, dt)
+    return column(m, cols), [s * x for x in column(m, dcols)]
 
 
 def _shepperd_tangent(R, dR):
     # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc.
-    c, coef = _column_coefficients(R)
+    c, dc = _column_tangent(R, dR)
     z = _hemisphere_scale(c, sum_squares(c))
     q = [x * z for x in c]
-    z_ = z[..., None, None]
-    u = [jnp.sum((z_ * m) * dR, axis=(-2, -1)) for m in coef]
+    u = [x * z for x in dc]
     qu = sum(q[a] * u[a] for a in range(4))
     return jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
 
