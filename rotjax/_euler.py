@@ -18,10 +18,11 @@ from ._numerics import (
     from_scalar_last,
     like_rank,
     public,
+    rsqrt,
     select,
     to_scalar_last,
 )
-from ._quaternion import _multiply, _stack, _to_matrix
+from ._quaternion import _components, _multiply, _stack, _to_matrix
 
 _VALID = (
     "three axis letters with no two consecutive equal, all uppercase for intrinsic "
@@ -342,14 +343,11 @@ def _abcd_patterns(seq):
     return np.array(_abcd(*np.eye(4), seq), dtype=float)
 
 
-def _euler_jacobian(comps, seq, width, patterns):
-    """The three angles' derivatives (in output order) as `(..., width)` arrays `J` such
-    that `d angle = sum(J * dx, axis=-1)` for a tangent `dx` of `width` components.
+def _euler_jacobian(comps, seq):
+    """The three angles' derivatives (in output order) with respect to the quaternion's four
+    components: ``J[k][i]``, per-rotation arrays, such that ``d angle_k = sum_i J[k][i] dq_i``.
 
     `comps` are the quaternion's four components (per-rotation arrays, any norm).
-    `patterns(wide)` gives the derivatives of the unscaled `(a, b, c, d)` with respect to
-    `dx`, four arrays that broadcast against `wide`, the components broadcast to
-    `(..., width)`.
 
     The outer angles are arg(A) -+ arg(C), with derivatives Im(conj(A) dA) / |A|^2 and
     Im(conj(C) dC) / |C|^2 (after the lock substitution); the middle one is
@@ -360,72 +358,61 @@ def _euler_jacobian(comps, seq, width, patterns):
     derivatives, about 1 / distance, stay right down to the lock threshold rather than
     dividing by an underflowed |C|^2.
 
-    Written for reverse mode, whose transpose of `sum(J * dx)` is one elementwise loop over
-    the cotangent of `dx` (17 XLA loops became 3 for quaternion_to_euler):
-
-    * the three divisions are per rotation, stacked and written by one loop (the barrier keeps
-      XLA from turning the stack back into three arrays, each written by a loop of its own);
-    * the rest is computed again on `(..., width)` arrays, each component of `q` broadcast
-      once: XLA:CPU then fuses it into one loop (broadcasting each value at every use
-      multiplied the code that fusion would emit, and XLA wrote the inputs out instead).
+    No division or root (XLA computes such an expensive value, read by a broadcast, in a loop
+    of its own): every entry is per-rotation arithmetic, which the rule's transpose computes
+    once per rotation in the one loop that writes the cotangent.
     """
-    scale, (a, b, c, d), (sa, sb, sc, sd), _, _ = _factors(*comps, seq)
+    scale, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*comps, seq)
     ua, ub, ma = _scaled_pair(sa, sb)  # substituted factors, for the outer angles
     uc, ud, mc = _scaled_pair(sc, sd)
-    na, nc = _hypot(a, b), _hypot(c, d)  # the factors before the substitution, for the middle
+    va, vb, _ = _scaled_pair(a, b)  # the factors before the substitution, for the middle
+    vc, vd, _ = _scaled_pair(c, d)
+    ka, kc = (exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))[1]
+              for u, v in ((a, b), (c, d)))  # fmt: skip
 
-    def inv_modulus(u, v):
+    def inv_modulus(u, v):  # 1 / |(u, v)| for a scaled pair, 0 at the origin (double where)
         m2 = u * u + v * v
         zero = m2 == 0
-        return jnp.where(zero, 0.0, 1 / jnp.sqrt(jnp.where(zero, 1.0, m2)))
+        return jnp.where(zero, 0.0, rsqrt(jnp.where(zero, 1.0, m2)))
 
-    recip = jax.lax.optimization_barrier(
-        jnp.stack(
-            [
-                scale * ma / (ua * ua + ub * ub),
-                scale * mc / (uc * uc + ud * ud),
-                scale / (na * na + nc * nc),
-                inv_modulus(*_scaled_pair(a, b)[:2]),
-                inv_modulus(*_scaled_pair(c, d)[:2]),
-                na,
-                nc,
-            ],
-            axis=-1,
-        )
-    )
-    shape = comps[0].shape + (width,)
-    comps = [jnp.broadcast_to(t[..., None], shape) for t in comps]
-    ea, eb, ec, ed = patterns(comps)
-    _, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*comps, seq)
-    p_a, p_c, t, ia, ic, na, nc = (jnp.broadcast_to(recip[..., i : i + 1], shape) for i in range(7))
-    sea, seb, sec, sed = _substitute((ea, eb, ec, ed), locks)
-    ua, ub, _ = _scaled_pair(sa, sb)
-    uc, ud, _ = _scaled_pair(sc, sd)
-    va, vb, _ = _scaled_pair(a, b)
-    vc, vd, _ = _scaled_pair(c, d)
-    j_a = (ua * seb - ub * sea) * p_a
-    j_c = (uc * sed - ud * sec) * p_c
-    j_mid = (na * (ic * (vc * ec + vd * ed)) - nc * (ia * (va * ea + vb * eb))) * t
+    # Reciprocals and roots by rsqrt (multiplications and additions: see its note): each sum
+    # of squares below is at least 1 (a scaled pair, or q scaled by _factors), so every
+    # derivative is computed once per rotation in the loop that writes the cotangent.
+    ya, yc = rsqrt(ua * ua + ub * ub), rsqrt(uc * uc + ud * ud)
+    p_a, p_c = scale * ma * ya * ya, scale * mc * yc * yc
+    ia, ic = inv_modulus(va, vb), inv_modulus(vc, vd)
+    na, nc = (va * va + vb * vb) * ia * ka, (vc * vc + vd * vd) * ic * kc  # |A|, |C|
+    yt = rsqrt(a * a + b * b + c * c + d * d)
+    t = scale * yt * yt
     order, factor, _ = _layout(seq)
-    jac = {"first": j_a - j_c, "mid": j_mid, "third": j_a + j_c}
-    jac = [f * jac[n] if f != 1 else jac[n] for n, f in zip(order, factor, strict=True)]
-    # The angle set to 0 at lock: the substitution already makes its J cancel exactly, unless a
-    # fused multiply-add rounds the two halves differently (as in the forward code).
-    jac[2] = jnp.where(locks[0] | locks[1], 0.0, jac[2])
-    return [jnp.where(bad, 0.0, j) for j in jac]
-
-
-def _contract(jac, dx):
-    return jnp.stack([jnp.sum(j * dx, axis=-1) for j in jac], axis=-1)
+    locked = locks[0] | locks[1]
+    jac = [[], [], []]
+    for col in _abcd_patterns(seq).T:  # d(a, b, c, d) / dq_i, in q's dtype (Python floats
+        ea, eb, ec, ed = (jnp.asarray(e, ua.dtype) for e in col)  # would be float64 in where)
+        sea, seb, sec, sed = _substitute((ea, eb, ec, ed), locks)
+        j_a = (ua * seb - ub * sea) * p_a
+        j_c = (uc * sed - ud * sec) * p_c
+        j_mid = (na * (ic * (vc * ec + vd * ed)) - nc * (ia * (va * ea + vb * eb))) * t
+        parts = {"first": j_a - j_c, "mid": j_mid, "third": j_a + j_c}
+        parts = [f * parts[n] if f != 1 else parts[n] for n, f in zip(order, factor, strict=True)]
+        # The angle set to 0 at lock: the substitution already makes its J cancel exactly,
+        # unless a fused multiply-add rounds the two halves differently (as in the forward).
+        parts[2] = jnp.where(locked, 0.0, parts[2])
+        for k in range(3):
+            jac[k].append(jnp.where(bad, 0.0, parts[k]))
+    return jac
 
 
 @_quat_to_euler.defjvp
 def _quat_to_euler_jvp(seq, per_rotation, primals, tangents):
-    # The exact derivative of the code above (see _euler_jacobian).
+    # The exact derivative of the code above (see _euler_jacobian); the tangent's components
+    # are read by _components, so that the transpose (reverse mode) writes the cotangent from
+    # per-rotation expressions, in one loop.
     (q,), (dq,) = primals, tangents
-    e = [like_rank(v, q) for v in _abcd_patterns(seq)]
-    jac = _euler_jacobian([q[..., i] for i in range(4)], seq, 4, lambda _: e)
-    return _quat_to_euler(q, seq, per_rotation), _contract(jac, dq)
+    jac = _euler_jacobian([q[..., i] for i in range(4)], seq)
+    d = _components(dq)
+    out = [sum(j * x for j, x in zip(row, d, strict=True)) for row in jac]
+    return _quat_to_euler(q, seq, per_rotation), jnp.stack(out, axis=-1)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
