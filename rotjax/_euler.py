@@ -14,6 +14,7 @@ from ._matrix import _column_tangent, _selected_column
 from ._numerics import (
     as_float,
     check_shape,
+    components,
     exponent_scale,
     from_scalar_last,
     like_rank,
@@ -22,7 +23,7 @@ from ._numerics import (
     select,
     to_scalar_last,
 )
-from ._quaternion import _components, _multiply, _stack, _to_matrix
+from ._quaternion import _multiply, _stack, _to_matrix
 
 _VALID = (
     "three axis letters with no two consecutive equal, all uppercase for intrinsic "
@@ -165,7 +166,7 @@ def _atan2_jvp(primals, tangents):
     # x and y are scaled by a power of two s first (exact), so that x^2 + y^2 cannot underflow:
     # it is s (xs dy - ys dx) / (xs^2 + ys^2), about 1 / |(x, y)| at any scale.
     (y, x), (dy, dx) = primals, tangents
-    xs, ys, s = _scaled_pair(x, y)
+    xs, ys, s, _ = _scaled_pair(x, y)
     r2 = xs * xs + ys * ys
     return _atan2(y, x), (xs * dy - ys * dx) * (s / jnp.where(r2 == 0, 1, r2))
 
@@ -178,11 +179,11 @@ def _euler_to_quat(a, seq):
 
 
 def _scaled_pair(u, v):
-    """`(u s, v s, s)` for the power of two `s` (exact, no derivative) that brings the
+    """`(u s, v s, s, 1 / s)` for the power of two `s` (exact, no derivative) that brings the
     larger of `|u|`, `|v|` into `[1, 2)`: their squares then neither underflow nor
     overflow."""
-    s, _ = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
-    return u * s, v * s, s
+    s, inv = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
+    return u * s, v * s, s, inv
 
 
 def _lifted(u, v):
@@ -363,12 +364,10 @@ def _euler_jacobian(comps, seq):
     once per rotation in the one loop that writes the cotangent.
     """
     scale, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*comps, seq)
-    ua, ub, ma = _scaled_pair(sa, sb)  # substituted factors, for the outer angles
-    uc, ud, mc = _scaled_pair(sc, sd)
-    va, vb, _ = _scaled_pair(a, b)  # the factors before the substitution, for the middle
-    vc, vd, _ = _scaled_pair(c, d)
-    ka, kc = (exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))[1]
-              for u, v in ((a, b), (c, d)))  # fmt: skip
+    ua, ub, ma, _ = _scaled_pair(sa, sb)  # substituted factors, for the outer angles
+    uc, ud, mc, _ = _scaled_pair(sc, sd)
+    va, vb, _, ka = _scaled_pair(a, b)  # the factors before the substitution, for the middle
+    vc, vd, _, kc = _scaled_pair(c, d)
 
     def inv_modulus(u, v):  # 1 / |(u, v)| for a scaled pair, 0 at the origin (double where)
         m2 = u * u + v * v
@@ -406,11 +405,11 @@ def _euler_jacobian(comps, seq):
 @_quat_to_euler.defjvp
 def _quat_to_euler_jvp(seq, per_rotation, primals, tangents):
     # The exact derivative of the code above (see _euler_jacobian); the tangent's components
-    # are read by _components, so that the transpose (reverse mode) writes the cotangent from
+    # are read by components, so that the transpose (reverse mode) writes the cotangent from
     # per-rotation expressions, in one loop.
     (q,), (dq,) = primals, tangents
     jac = _euler_jacobian([q[..., i] for i in range(4)], seq)
-    d = _components(dq)
+    d = components(dq)
     out = [sum(j * x for j, x in zip(row, d, strict=True)) for row in jac]
     return _quat_to_euler(q, seq, per_rotation), jnp.stack(out, axis=-1)
 

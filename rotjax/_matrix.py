@@ -11,6 +11,7 @@ from ._eigen import nearest_quaternion
 from ._numerics import (
     as_float,
     check_shape,
+    components,
     exponent_scale,
     from_scalar_last,
     max_abs,
@@ -19,7 +20,6 @@ from ._numerics import (
     stack_scaled,
     sum_squares,
 )
-from ._quaternion import _components
 from ._shepperd import column, entries, k4_columns, masks, select_column
 
 METHODS = ("shepperd", "markley", "optimal")
@@ -103,13 +103,13 @@ def _column_tangent(R, dR):
     ``tau = y (1 - h y^2 / 2)``, ``y = rsqrt(h)`` (rsqrt's rule); ``K`` is affine in ``R``
     and the masks are constant, so ``dc`` is the selected column of ``K``'s own formula on
     ``s dR``, with ``dt`` for ``t``. The entries of ``dR`` are read by
-    :func:`rotjax._quaternion._components`: in reverse mode the cotangent of ``R`` is then
+    :func:`rotjax._numerics.components`: in reverse mode the cotangent of ``R`` is then
     written by one loop from per-rotation expressions (slices of ``dR`` would transpose to
     nine pads, each evaluated for every entry)."""
     cols, diag, (h, y, s) = _homogeneous_k(R)
     m = masks(diag)
-    d = _components(dR.reshape(*dR.shape[:-2], 9))
-    r_dr = sum((x * s) * e for x, e in zip(entries(R), d, strict=True))  # r . dR (unscaled)
+    d = components(dR.reshape(*dR.shape[:-2], 9))
+    r_dr = sum((x * s) * e for x, e in zip(entries(R), d, strict=True))  # r . dR, r = s R
     dt = (2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y) * r_dr
     dcols, _ = k4_columns(d, dt)
     return column(m, cols), [s * x for x in column(m, dcols)]

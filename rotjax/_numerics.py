@@ -207,6 +207,16 @@ def stack_scaled(parts, scale):
     return jnp.moveaxis(jnp.stack(parts, axis=0) * scale[None], 0, -1)
 
 
+def components(x):
+    """The components of ``x`` (last axis) as per-rotation arrays, read as sums against one-hot
+    rows: for a hand-written rule's tangent, whose transpose (reverse mode) then writes each
+    cotangent component by a select on the last axis, in one loop that XLA:CPU vectorises
+    (slices transpose to pads, and a leading axis to a transposing copy of its own)."""
+    k = x.shape[-1]
+    col = jax.lax.broadcasted_iota(jnp.int32, (1,) * (x.ndim - 1) + (k,), x.ndim - 1)
+    return [jnp.sum(jnp.where(col == i, x, 0.0), axis=-1) for i in range(k)]
+
+
 def max_abs(*xs):
     """Elementwise largest `|x|` over per-element arrays (`jnp.maximum`, not `jnp.max`
     over a stacked axis: XLA:CPU splits a reduction into loops of its own), in a balanced tree

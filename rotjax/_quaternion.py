@@ -18,6 +18,7 @@ from jax.typing import ArrayLike
 from ._numerics import (
     as_float,
     check_shape,
+    components,
     from_scalar_last,
     like_rank,
     max_abs,
@@ -88,28 +89,20 @@ def _scaled_vector_part_jvp(scale, with_w, primals, tangents):
     # JAX's derivative of the code above, grouped: with the prescaled components (s a constant
     # power of two), d(k v) = k dv + v dk, dk = 2 k_n2 (u . du) + k_w dw (u = v, or q with
     # with_w), where k_n2 and k_w are JAX's derivatives of `scale` (forward mode, per rotation).
-    # Written for reverse mode, whose transpose must again be one vectorised loop: the tangent
-    # is read as the rows of dq moved to a leading axis, and each long per-rotation factor
-    # (k s, k_n2, k_w) multiplies whole rows rather than sitting in a stacked part; `v dk` is
-    # stacked part by part, so that dk's transpose is a sum of three products (a sum over the
-    # stacked axis would be a reduction: a loop of its own). JAX's own transpose of the code
-    # above computed k in each part's branch: a scalar loop, 20x slower in float32.
+    # Written for reverse mode: the tangent's components are read by `components`, so that its
+    # transpose writes each cotangent component from a per-rotation expression, in one
+    # vectorised loop (JAX's own transpose of the code above computed k in each part's branch:
+    # a scalar loop, 20x slower in float32).
     (q,), (dq,) = primals, tangents
     (x, y, z, w), s = _prescaled_parts(q)  # read once: the value is the forward's, from k
     n2 = x * x + y * y + z * z + (w * w if with_w else 0)
     ones, zeros = jnp.ones_like(n2), jnp.zeros_like(n2)
     k, k_n2 = jax.jvp(scale, (n2, w), (ones, zeros))
     _, k_w = jax.jvp(scale, (n2, w), (zeros, ones))
-    d = jnp.moveaxis(dq, -1, 0)
-    row = jax.lax.broadcasted_iota(jnp.int32, (4,) + (1,) * (d.ndim - 1), 0)
-    u = jnp.stack([x, y, z, w if with_w else zeros], axis=0)
-    dk = (2 * k_n2 * s) * jnp.sum(u * d, axis=0) + (k_w * s) * jnp.sum(
-        jnp.where(row == 3, d, 0.0), axis=0
-    )
-    rows = jnp.where(row < 3, (k * s)[None] * d, 0.0) + jnp.stack(
-        [x * dk, y * dk, z * dk, zeros], axis=0
-    )
-    return stack_scaled([x, y, z], k), jnp.moveaxis(rows[:3], 0, -1)
+    dx, dy, dz, dw = (e * s for e in components(dq))
+    dk = 2 * k_n2 * (x * dx + y * dy + z * dz + (w * dw if with_w else 0)) + k_w * dw
+    out = [k * dx + x * dk, k * dy + y * dk, k * dz + z * dk]
+    return stack_scaled([x, y, z], k), jnp.stack(out, axis=-1)
 
 
 def _multiply(p, q):
@@ -360,16 +353,6 @@ def _apply(q, v):
     return _stack([a + d[0], b + d[1], c + d[2]])
 
 
-def _components(x):
-    """The components of ``x`` (last axis) as per-rotation arrays, read as sums against one-hot
-    rows: for a hand-written rule's tangent, whose transpose (reverse mode) then writes each
-    cotangent component by a select on the last axis, in one loop that XLA:CPU vectorises
-    (slices transpose to pads, and a leading axis to a transposing copy of its own)."""
-    k = x.shape[-1]
-    col = jax.lax.broadcasted_iota(jnp.int32, (1,) * (x.ndim - 1) + (k,), x.ndim - 1)
-    return [jnp.sum(jnp.where(col == i, x, 0.0), axis=-1) for i in range(k)]
-
-
 @_apply.defjvp
 def _apply_jvp(primals, tangents):
     # JAX's derivative of the code above, grouped. With p the prescaled quaternion (s a
@@ -377,14 +360,14 @@ def _apply_jvp(primals, tangents):
     # d out = dv + r^2 T(p, dv) + r^2 s T'(p, v)[dq] - 2 r^4 s (p . dq) T(p, v),
     # T' the derivative in p (linear in both), T'(p, v)[p] = 2 T(p, v), and
     # du = r s (dq - r^2 p (p . dq)). Written for reverse mode: the tangents' components are
-    # read by _components, and every cotangent component is then a per-rotation expression
+    # read by components, and every cotangent component is then a per-rotation expression
     # that XLA computes once per rotation. JAX's own transpose of the code above wrote the
     # cotangent of q in four loops, each computing the whole chain again.
     (q, v), (dq, dv) = primals, tangents
     p, s = _prescaled_parts(q)
     r2 = rsqrt(sum_squares(p)) ** 2
     vs = [v[..., i] for i in range(3)]
-    e, d = _components(dv), _components(dq)
+    e, d = components(dv), components(dq)
     by_v = _turn(p, e)  # T(p, dv): linear in dv
     by_q = jax.jvp(lambda u: _turn(u, vs), (p,), (d,))[1]  # T'(p, v)[dq]
     m = (2 * s) * (r2 * r2) * sum(x * dx for x, dx in zip(p, d, strict=True))

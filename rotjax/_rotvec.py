@@ -12,6 +12,7 @@ from ._matrix import _from_matrix
 from ._numerics import (
     as_float,
     check_shape,
+    components,
     eps,
     exponent_scale,
     from_scalar_last,
@@ -120,19 +121,18 @@ def _rotvec_to_quat(v):
 def _rotvec_to_quat_jvp(primals, tangents):
     # JAX's derivative of the code above, grouped: d(k v) = k dv + v dk and dc, with
     # dk = 2 k' (v . dv), dc = 2 c' (v . dv) and k', c' JAX's derivatives of _exp_coeffs.
-    # Written for reverse mode as _scaled_vector_part's rule (rotjax._quaternion): k, k' and
-    # c' multiply whole rows of the tangent, and `v dk` is stacked part by part. JAX's own
-    # transpose of the code above was a scalar loop in float64 (a function outlined per
-    # component), 5x slower than float32's.
+    # Written for reverse mode as _scaled_vector_part's rule (rotjax._quaternion), the tangent
+    # read by `components`. JAX's own transpose of the code above was a scalar loop in float64
+    # (a function outlined per component), 5x slower than float32's.
     (v,), (dv,) = primals, tangents
     x, y, z = (v[..., i] for i in range(3))
     t2 = x * x + y * y + z * z
     (k, c), (dk2, dc2) = jax.jvp(_exp_coeffs, (t2,), (2 * jnp.ones_like(t2),))
-    d = jnp.moveaxis(dv, -1, 0)
-    vd = jnp.sum(jnp.stack([x, y, z], axis=0) * d, axis=0)
-    dk, dc = dk2 * vd, dc2 * vd
-    rows = k[None] * d + jnp.stack([x * dk, y * dk, z * dk], axis=0)
-    return _rotvec_to_quat(v), jnp.moveaxis(jnp.concatenate([rows, dc[None]], axis=0), 0, -1)
+    dx, dy, dz = components(dv)
+    vd = x * dx + y * dy + z * dz
+    dk = dk2 * vd
+    out = [k * dx + x * dk, k * dy + y * dk, k * dz + z * dk, dc2 * vd]
+    return _rotvec_to_quat(v), jnp.stack(out, axis=-1)
 
 
 # f(u) = atan(sqrt(u)) / sqrt(u) on [0, 1]: Chebyshev fits (mpmath.chebyfit at 40 digits) of

@@ -111,6 +111,26 @@ def test_check_grads_generic(name):
     check_grads(f, (x,), order=1, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
 
 
+RULES = {
+    "quaternion_to_rotvec": rj.quaternion_to_rotvec,
+    "quaternion_to_mrp": rj.quaternion_to_mrp,
+    "quaternion_to_euler": lambda q: rj.quaternion_to_euler(q, "ZYX"),
+    "rotvec_to_quaternion": lambda q: rj.rotvec_to_quaternion(3 * q[..., :3]),  # past pi
+    "quaternion_apply": lambda q: rj.quaternion_apply(
+        q, jnp.stack([q[..., 1], 2.0 - q[..., 3], q[..., 0]], -1)
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(RULES))
+def test_check_grads_of_hand_written_rules_off_the_unit_sphere(name):
+    """The functions with a hand-written rule, at quaternions of norm 0.3 and 4 (off the
+    unit sphere, where the rule must still be the derivative of the code) and on it: first
+    and second order, both modes (quaternion_apply in both arguments through one input)."""
+    q = np.concatenate([Q[:2] * 0.3, Q[2:] * 4.0, Q[:1]])
+    check_grads(RULES[name], (q,), order=2, modes=("fwd", "rev"))
+
+
 @pytest.mark.parametrize("seq", SEQS)
 def test_check_grads_euler_generic(seq):
     a = np.array([0.4, 1.1 if is_proper(seq) else 0.6, -2.0])

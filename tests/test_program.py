@@ -50,7 +50,7 @@ CASES = {
         rj.quaternion_apply, [(4,), (3,)], (1, BYTES_SLACK, 100), (1, BYTES_SLACK, 200)
     ),
     "quaternion_to_mrp": (
-        rj.quaternion_to_mrp, [(4,)], (1, BYTES_SLACK, 100), (1, BYTES_SLACK, 150)
+        rj.quaternion_to_mrp, [(4,)], (1, BYTES_SLACK, 100), (1, BYTES_SLACK, 175)
     ),
     "quaternion_inverse": (
         rj.quaternion_inverse, [(4,)], (1, BYTES_SLACK, 75), (1, BYTES_SLACK, 115)
