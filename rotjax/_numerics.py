@@ -199,7 +199,7 @@ def stack_scaled(parts, scale):
 
     Written for XLA:CPU, which emits the stacked result as one loop over its ``k`` slots. A
     per-rotation factor computed inside each stacked part is computed in that part's branch
-    of the loop, which LLVM can neither hoist nor vectorise (a scalar loop, 3-20x slower);
+    of the loop, which LLVM can neither hoist nor vectorise (a scalar loop);
     applied to the whole stack, it is computed once per rotation and the loop is vectorised.
     Keep the parts cheap (components, sums of products) and put every long per-rotation
     expression (a norm, a root, an atan) in ``scale``.

@@ -92,7 +92,7 @@ def _scaled_vector_part_jvp(scale, with_w, primals, tangents):
     # Written for reverse mode: the tangent's components are read by `components`, so that its
     # transpose writes each cotangent component from a per-rotation expression, in one
     # vectorised loop (JAX's own transpose of the code above computed k in each part's branch:
-    # a scalar loop, 20x slower in float32).
+    # a scalar loop).
     (q,), (dq,) = primals, tangents
     (x, y, z, w), s = _prescaled_parts(q)  # read once: the value is the forward's, from k
     n2 = x * x + y * y + z * z + (w * w if with_w else 0)
