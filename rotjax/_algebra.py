@@ -16,6 +16,7 @@ from ._numerics import (
     FULL,
     _check_static,
     as_float,
+    cast,
     check_shape,
     from_scalar_last,
     like_rank,
@@ -59,7 +60,7 @@ def quaternion_canonical(q: ArrayLike, scalar_first: bool = False) -> Array:
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     out = _canonical(to_scalar_last(q, scalar_first))
-    return from_scalar_last(out, scalar_first).astype(dt)
+    return cast(from_scalar_last(out, scalar_first), dt)
 
 
 @public
@@ -96,7 +97,7 @@ def quaternion_power(q: ArrayLike, n: ArrayLike, scalar_first: bool = False) -> 
     q = to_scalar_last(q, scalar_first)
     v = _quat_to_rotvec(q)
     out = _rotvec_to_quat(like_rank(n, v[..., 0])[..., None] * v)
-    return from_scalar_last(out, scalar_first).astype(dt)
+    return cast(from_scalar_last(out, scalar_first), dt)
 
 
 # --- finite rotation groups ------------------------------------------------------------
@@ -344,4 +345,4 @@ def wahba_sensitivity(a: ArrayLike, b: ArrayLike, weights: ArrayLike | None = No
     BBt = jnp.einsum("...ij,...kj->...ik", B, B, precision=FULL)
     eye = jnp.eye(3, dtype=B.dtype)
     scale = (jnp.mean(weights, axis=-1) / zeta)[..., None, None]
-    return (scale * (kappa[..., None, None] * like_rank(eye, BBt) + BBt)).astype(dt)
+    return cast((scale * (kappa[..., None, None] * like_rank(eye, BBt) + BBt)), dt)

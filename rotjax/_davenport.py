@@ -8,7 +8,7 @@ from jax.typing import ArrayLike
 
 from ._euler import _quat_to_euler
 from ._matrix import _from_matrix
-from ._numerics import as_float, check_shape, cross, from_scalar_last, public, to_scalar_last
+from ._numerics import as_float, cast, check_shape, cross, from_scalar_last, public, to_scalar_last
 from ._quaternion import _conjugate, _multiply
 from ._rotvec import _rotvec_to_quat
 
@@ -86,7 +86,7 @@ def davenport_to_quaternion(
         qi = _rotvec_to_quat(angles[..., i, None] * unit[..., i, :])
         q = qi if q is None else (_multiply(qi, q) if extrinsic else _multiply(q, qi))
     q = jnp.where(bad[..., None], jnp.nan, q)
-    return from_scalar_last(q, scalar_first).astype(dt)
+    return cast(from_scalar_last(q, scalar_first), dt)
 
 
 @public(static=("extrinsic",))
@@ -165,4 +165,4 @@ def quaternion_to_davenport(
     ang = jnp.where(bad[..., None], jnp.nan, ang)
     if degrees:
         ang = jnp.rad2deg(ang)
-    return ang.astype(dt)
+    return cast(ang, dt)

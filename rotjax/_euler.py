@@ -13,17 +13,18 @@ from jax.typing import ArrayLike
 from ._matrix import _column_tangent, _selected_column
 from ._numerics import (
     as_float,
+    cast,
     check_shape,
-    components,
     exponent_scale,
     from_scalar_last,
-    like_rank,
     public,
     rsqrt,
     select,
+    stack,
     to_scalar_last,
+    unstack,
 )
-from ._quaternion import _multiply, _stack, _to_matrix
+from ._quaternion import _multiply, _to_matrix
 
 _VALID = (
     "three axis letters with no two consecutive equal, all uppercase for intrinsic "
@@ -75,7 +76,7 @@ def _elementary(axis: int, angle):
     z = jnp.zeros_like(s)
     comps = [z, z, z, c]
     comps[axis] = s
-    return jnp.stack(comps, axis=-1)
+    return stack(comps)
 
 
 # --- a polynomial atan2 ----------------------------------------------------------------------
@@ -296,24 +297,21 @@ def _substitute(abcd, locks):
     return a, b, c, d
 
 
-# The last angle in the output (`first` of an intrinsic sequence, `third` of an extrinsic one)
-# is the one set to 0 at exact lock.
-_LAST = np.array([False, False, True])
+def _quat_to_euler(q, seq):
+    """Euler angles (output order) of a scalar-last quaternion of any non-zero norm."""
+    # The angles stacked on the last axis: XLA:CPU writes them in vectorised loops (a stack on
+    # a leading axis gave one narrow loop here; after the Shepperd column, in matrix_to_euler,
+    # it gives one full-width loop).
+    return jnp.stack(_quat_to_euler_parts(tuple(unstack(q)), seq), axis=-1)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
-def _quat_to_euler(q, seq, per_rotation=False):
-    """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold.
-
-    `q` is scalar last and of any non-zero norm (every step is a ratio inside atan2).
-
-    `per_rotation`: finish every angle on per-rotation arrays and stack them on a leading
-    axis, moved last (the matrix path: with the Shepperd column in front, XLA:CPU then emits
-    one vectorised loop, where the last-axis form gave a scalar one); else stack the three
-    atan2 on the last axis and finish there (the quaternion path: two vectorised loops, which
-    ran several times faster than the one scalar loop of the other form).
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _quat_to_euler_parts(q, seq):
+    """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold,
+    on the four components of ``q`` (scalar last, any non-zero norm: every step is a ratio
+    inside atan2); the three angles in output order.
     """
-    _, (a, b, c, d), _, locks, bad = _factors(*(q[..., n] for n in range(4)), seq)
+    _, (a, b, c, d), _, locks, bad = _factors(*q, seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
@@ -328,14 +326,9 @@ def _quat_to_euler(q, seq, per_rotation=False):
     locked = locks[0] | locks[1]
     # The substitution makes the zeroed (last) angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: it is set exactly.
-    if per_rotation:
-        out = [_atan2(num[n], den[n]) * f + s for n, f, s in zip(order, factor, shift, strict=True)]
-        out[2] = jnp.where(locked, 0.0, out[2])
-        return _stack([jnp.where(bad, jnp.nan, x) for x in out])
-    ang = jnp.stack([_atan2(num[n], den[n]) for n in order], axis=-1)
-    out = ang * like_rank(factor, ang) + like_rank(shift, ang)
-    out = jnp.where(locked[..., None] & like_rank(_LAST, out, bool), 0.0, out)
-    return jnp.where(bad[..., None], jnp.nan, out)
+    out = [_atan2(num[n], den[n]) * f + s for n, f, s in zip(order, factor, shift, strict=True)]
+    out[2] = jnp.where(locked, 0.0, out[2])
+    return tuple(jnp.where(bad, jnp.nan, x) for x in out)
 
 
 @functools.cache
@@ -402,37 +395,38 @@ def _euler_jacobian(comps, seq):
     return jac
 
 
-@_quat_to_euler.defjvp
-def _quat_to_euler_jvp(seq, per_rotation, primals, tangents):
-    # The exact derivative of the code above (see _euler_jacobian); the tangent's components
-    # are read by components, so that the transpose (reverse mode) writes the cotangent from
-    # per-rotation expressions, in one loop.
+@_quat_to_euler_parts.defjvp
+def _quat_to_euler_parts_jvp(seq, primals, tangents):
+    # The exact derivative of the code above (see _euler_jacobian).
     (q,), (dq,) = primals, tangents
-    jac = _euler_jacobian([q[..., i] for i in range(4)], seq)
-    d = components(dq)
-    out = [sum(j * x for j, x in zip(row, d, strict=True)) for row in jac]
-    return _quat_to_euler(q, seq, per_rotation), jnp.stack(out, axis=-1)
+    jac = _euler_jacobian(q, seq)
+    out = tuple(sum(j * x for j, x in zip(row, dq, strict=True)) for row in jac)
+    return _quat_to_euler_parts(q, seq), out
+
+
+def _matrix_to_euler(R, seq):
+    """quaternion_to_euler of the Shepperd column of ``R``."""
+    return stack(_matrix_to_euler_parts(R, seq), branches=True)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
-def _matrix_to_euler(R, seq):
+def _matrix_to_euler_parts(R, seq):
     """quaternion_to_euler's extraction of the Shepperd column: the angles do not depend on the
     quaternion's norm or sign, so the column needs no normalisation (NaN for a non-rotation,
     through its diagonal). The rule below is JAX's derivative of this code (tested)."""
     c, _ = _selected_column(R)
-    return _quat_to_euler(jnp.stack(c, axis=-1), seq, True)
+    return _quat_to_euler_parts(tuple(c), seq)
 
 
-@_matrix_to_euler.defjvp
-def _matrix_to_euler_jvp(seq, primals, tangents):
+@_matrix_to_euler_parts.defjvp
+def _matrix_to_euler_parts_jvp(seq, primals, tangents):
     # The column's derivative, then quaternion_to_euler's rule (its exact derivative). The
     # column is written once (the barrier): the rule's loops read it instead of each
     # extracting it again from R.
     (R,), (dR,) = primals, tangents
     c, dc = _column_tangent(R, dR)
-    c = jax.lax.optimization_barrier(jnp.stack(c, axis=-1))
-    dc = jnp.stack(dc, axis=-1)
-    return jax.jvp(lambda c: _quat_to_euler(c, seq, True), (c,), (dc,))
+    c = jax.lax.optimization_barrier(tuple(c))
+    return jax.jvp(lambda c: _quat_to_euler_parts(c, seq), (c,), (tuple(dc),))
 
 
 @public
@@ -467,7 +461,7 @@ def euler_to_quaternion(
         ```
     """
     a, dt = _prep_angles(angles, degrees)
-    return from_scalar_last(_euler_to_quat(a, seq), scalar_first).astype(dt)
+    return cast(from_scalar_last(_euler_to_quat(a, seq), scalar_first), dt)
 
 
 @public
@@ -494,7 +488,7 @@ def euler_to_matrix(angles: ArrayLike, seq: str, degrees: bool = False) -> Array
         ```
     """
     a, dt = _prep_angles(angles, degrees)
-    return _to_matrix(_euler_to_quat(a, seq)).astype(dt)
+    return cast(_to_matrix(_euler_to_quat(a, seq)), dt)
 
 
 @public
@@ -555,7 +549,7 @@ def quaternion_to_euler(
     ang = _quat_to_euler(to_scalar_last(q, scalar_first), seq)
     if degrees:
         ang = jnp.rad2deg(ang)
-    return ang.astype(dt)
+    return cast(ang, dt)
 
 
 @public
@@ -595,4 +589,4 @@ def matrix_to_euler(R: ArrayLike, seq: str, degrees: bool = False) -> Array:
     ang = _matrix_to_euler(R, seq)
     if degrees:
         ang = jnp.rad2deg(ang)
-    return ang.astype(dt)
+    return cast(ang, dt)

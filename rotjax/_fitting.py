@@ -25,6 +25,7 @@ from ._eigen import (
 from ._numerics import (
     FULL,
     as_float,
+    cast,
     check_shape,
     cross,
     from_scalar_last,
@@ -179,7 +180,7 @@ def geodesic_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
     c = 0.5 * (jnp.trace(M, axis1=-2, axis2=-1) - 1)
     s = safe_norm(vee(M))
     # atan2 of an infinite sine is a finite pi/2: an infinite component gives NaN instead.
-    return jnp.where(jnp.isfinite(s) & jnp.isfinite(c), safe_atan2(s, c), jnp.nan).astype(dt)
+    return cast(jnp.where(jnp.isfinite(s) & jnp.isfinite(c), safe_atan2(s, c), jnp.nan), dt)
 
 
 @public
@@ -210,7 +211,7 @@ def chordal_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
     D = R_a - R_b
-    return safe_norm(D.reshape(*D.shape[:-2], 9)).astype(dt)
+    return cast(safe_norm(D.reshape(*D.shape[:-2], 9)), dt)
 
 
 # --- continuous representations ----------------------------------------------------------
@@ -255,7 +256,7 @@ def sixd_to_matrix(x: ArrayLike) -> Array:
     b1 = a1 / jnp.sqrt(jnp.sum(a1 * a1, axis=-1, keepdims=True))
     u2 = _pow2_prescale(a2 - jnp.sum(b1 * a2, axis=-1, keepdims=True) * b1)
     b2 = u2 / jnp.sqrt(jnp.sum(u2 * u2, axis=-1, keepdims=True))
-    return jnp.stack([b1, b2, cross(b1, b2)], axis=-1).astype(dt)
+    return cast(jnp.stack([b1, b2, cross(b1, b2)], axis=-1), dt)
 
 
 def _pow2_prescale(v):
@@ -297,7 +298,7 @@ def matrix_to_sixd(R: ArrayLike) -> Array:
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
-    return jnp.concatenate([R[..., :, 0], R[..., :, 1]], axis=-1).astype(dt)
+    return cast(jnp.concatenate([R[..., :, 0], R[..., :, 1]], axis=-1), dt)
 
 
 @public
@@ -337,7 +338,7 @@ def nined_to_matrix(x: ArrayLike) -> Array:
     """
     (x,), dt = as_float(x)
     check_shape(x, (9,), "x")
-    return nearest_rotation(x.reshape(*x.shape[:-1], 3, 3)).astype(dt)
+    return cast(nearest_rotation(x.reshape(*x.shape[:-1], 3, 3)), dt)
 
 
 # --- Wahba's problem --------------------------------------------------------------------
@@ -424,7 +425,7 @@ def align_vectors(
     # neither underflows nor overflows; the rotation does not depend on these scales.
     B = _sum_outer(a, b, pow2_factors(a, (-2, -1)), pow2_factors(b, (-2, -1)))
     q = nearest_quaternion(B)
-    return from_scalar_last(q, scalar_first).astype(dt)  # w >= 0
+    return cast(from_scalar_last(q, scalar_first), dt)  # w >= 0
 
 
 # --- averaging and interpolation ---------------------------------------------------------
@@ -488,7 +489,7 @@ def quaternion_mean(
     v = top_eigenvector(M)
     if weights is not None:
         v = jnp.where(jnp.all(weights == 0, axis=-1, keepdims=True), jnp.nan, v)
-    return from_scalar_last(v, scalar_first).astype(dt)  # w >= 0
+    return cast(from_scalar_last(v, scalar_first), dt)  # w >= 0
 
 
 @public
@@ -533,4 +534,4 @@ def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike, scalar_first: bool = False) 
     q = to_scalar_last(q, scalar_first)
     rel = _quat_to_rotvec(_multiply(_conjugate(p), q))  # angle in [0, pi]: the shorter arc
     out = _multiply(p, _rotvec_to_quat(like_rank(t[..., None], rel) * rel))
-    return from_scalar_last(out, scalar_first).astype(dt)
+    return cast(from_scalar_last(out, scalar_first), dt)

@@ -35,6 +35,7 @@ from jax.typing import ArrayLike
 from ._euler import is_proper, parse_seq
 from ._numerics import (
     as_float,
+    cast,
     check_shape,
     cross,
     from_scalar_last,
@@ -212,7 +213,7 @@ def euler_rate_matrix(angles: ArrayLike, seq: str, frame: str = "body") -> Array
     """
     (a,), dt = as_float(angles)
     check_shape(a, (3,), "angles")
-    return _rate_matrix(a, seq, frame).astype(dt)
+    return cast(_rate_matrix(a, seq, frame), dt)
 
 
 @public
@@ -245,7 +246,7 @@ def euler_rates_to_angular_velocity(
     check_shape(a, (3,), "angles")
     check_shape(r, (3,), "rates")
     E = _rate_matrix(a, seq, frame)
-    return matvec(E, r).astype(dt)
+    return cast(matvec(E, r), dt)
 
 
 @public
@@ -293,7 +294,7 @@ def angular_velocity_to_euler_rates(
     check_shape(a, (3,), "angles")
     check_shape(w, (3,), "omega")
     d = jnp.asarray(damping).astype(a.dtype)
-    return _inverse_rates(a, w, seq, frame, d).astype(dt)
+    return cast(_inverse_rates(a, w, seq, frame, d), dt)
 
 
 @public
@@ -324,7 +325,7 @@ def euler_singularity(angles: ArrayLike, seq: str) -> Array:
     check_shape(a, (3,), "angles")
     axes, _ = parse_seq(seq)
     h, _, _, _ = _middle_terms(axes, a[..., 1])
-    return jnp.abs(h).astype(dt)
+    return cast(jnp.abs(h), dt)
 
 
 # --- quaternion and matrix derivatives ---------------------------------------------------------
@@ -373,7 +374,7 @@ def quaternion_derivative(
     check_shape(w, (3,), "omega")
     _check_frame(frame)
     qd = _quat_rate(to_scalar_last(q, scalar_first), w, frame)
-    return from_scalar_last(qd, scalar_first).astype(dt)
+    return cast(from_scalar_last(qd, scalar_first), dt)
 
 
 @public
@@ -418,7 +419,7 @@ def quaternion_derivative_to_angular_velocity(
     qc = _conjugate(q)
     prod = _multiply(qc, qd) if frame == "body" else _multiply(qd, qc)
     x, y, z, w = (q[..., i : i + 1] for i in range(4))
-    return (2 * prod[..., :3] / (x * x + y * y + z * z + w * w)).astype(dt)
+    return cast((2 * prod[..., :3] / (x * x + y * y + z * z + w * w)), dt)
 
 
 @public
@@ -452,7 +453,7 @@ def matrix_derivative_to_angular_velocity(
     check_shape(Rd, (3, 3), "R_dot")
     _check_frame(frame)
     Rt = jnp.swapaxes(R, -1, -2)
-    return vee(matmul(Rt, Rd) if frame == "body" else matmul(Rd, Rt)).astype(dt)
+    return cast(vee(matmul(Rt, Rd) if frame == "body" else matmul(Rd, Rt)), dt)
 
 
 @public
@@ -486,7 +487,7 @@ def angular_velocity_to_matrix_derivative(
     check_shape(w, (3,), "omega")
     _check_frame(frame)
     W = hat(w)
-    return (matmul(R, W) if frame == "body" else matmul(W, R)).astype(dt)
+    return cast((matmul(R, W) if frame == "body" else matmul(W, R)), dt)
 
 
 # --- attitude propagation ----------------------------------------------------------------------
@@ -631,7 +632,7 @@ def unwrap_euler(angles: ArrayLike, seq: str, axis: int = 0) -> Array:
     axis = _time_axis(axis, a.ndim, "angles", a.shape)
     x = jnp.moveaxis(a, axis, 0)
     if x.shape[0] == 0:
-        return a.astype(dt)
+        return cast(a, dt)
     two_pi = 2 * np.pi
     # Second solution set: R_i(a0 + pi) R_j(b) R_k(a2 + pi) = R_i(a0) R_j(a1) R_k(a2) needs
     # b = pi - a1 when i != k and b = -a1 when i == k (rotating by pi about e_i flips e_j).
@@ -660,7 +661,7 @@ def unwrap_euler(angles: ArrayLike, seq: str, axis: int = 0) -> Array:
 
     seen0 = jnp.zeros(x.shape[1:-1] + (1,), dtype=bool)
     _, y = jax.lax.scan(step, (jnp.zeros_like(x[0]), seen0), x)
-    return jnp.moveaxis(y, 0, axis).astype(dt)
+    return cast(jnp.moveaxis(y, 0, axis), dt)
 
 
 def _time_axis(axis, ndim: int, name: str, shape) -> int:
@@ -744,7 +745,7 @@ def euler_accelerations_to_angular_acceleration(
     check_shape(r, (3,), "rates")
     check_shape(acc, (3,), "accelerations")
     E = _rate_matrix(a, seq, frame)
-    return (matvec(E, acc) + _rate_derivative_terms(E, r, seq)).astype(dt)
+    return cast((matvec(E, acc) + _rate_derivative_terms(E, r, seq)), dt)
 
 
 @public
@@ -796,7 +797,7 @@ def angular_acceleration_to_euler_accelerations(
     check_shape(al, (3,), "alpha")
     d = jnp.asarray(damping).astype(a.dtype)
     E = _rate_matrix(a, seq, frame)
-    return _inverse_rates(a, al - _rate_derivative_terms(E, r, seq), seq, frame, d).astype(dt)
+    return cast(_inverse_rates(a, al - _rate_derivative_terms(E, r, seq), seq, frame, d), dt)
 
 
 # --- attitude from sampled angular velocity ----------------------------------------------------
@@ -970,7 +971,7 @@ def unwrap_quaternion(q: ArrayLike, axis: int = 0, scalar_first: bool = False) -
     x = jnp.moveaxis(x, axis, 0)
     n = x.shape[0]
     if n == 0:
-        return jnp.moveaxis(x, 0, axis).astype(dt)
+        return cast(jnp.moveaxis(x, 0, axis), dt)
     ok = jnp.all(jnp.isfinite(x), axis=-1)  # (T, ...)
     idx = jnp.arange(n).reshape((n,) + (1,) * (ok.ndim - 1))
     last = jax.lax.cummax(jnp.where(ok, idx, -1), axis=0)  # last finite index <= k
@@ -980,4 +981,4 @@ def unwrap_quaternion(q: ArrayLike, axis: int = 0, scalar_first: bool = False) -
     sign = select(dot < 0, -1.0, 1.0, x.dtype)
     flips = jnp.cumprod(sign, axis=0)
     out = jnp.where(ok[..., None], x * flips[..., None], x)  # bad samples as given
-    return jnp.moveaxis(out, 0, axis).astype(dt)
+    return cast(jnp.moveaxis(out, 0, axis), dt)

@@ -10,6 +10,7 @@ from jax.typing import ArrayLike
 from ._eigen import nearest_quaternion
 from ._numerics import (
     as_float,
+    cast,
     check_shape,
     components,
     exponent_scale,
@@ -17,6 +18,7 @@ from ._numerics import (
     max_abs,
     public,
     rsqrt,
+    stack,
     stack_scaled,
     sum_squares,
 )
@@ -78,8 +80,13 @@ def _hemisphere_scale(v, sq):
     return jnp.where(v[3] < 0, -s, s)
 
 
-@jax.custom_jvp
 def _shepperd(R):
+    """The quaternion of :func:`_shepperd_parts`, stacked."""
+    return stack(_shepperd_parts(R))
+
+
+@jax.custom_jvp
+def _shepperd_parts(R):
     """Shepperd extraction, scalar last, `w >= 0`: the selected column of `K` over its norm.
 
     Written for XLA:CPU: every step is a per-rotation scalar expression (no reduction over a
@@ -93,7 +100,8 @@ def _shepperd(R):
     c, sq = _selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
-    return stack_scaled(c, _hemisphere_scale(c, sq))
+    z = _hemisphere_scale(c, sq)
+    return tuple(x * z for x in c)
 
 
 def _column_tangent(R, dR):
@@ -122,13 +130,13 @@ def _shepperd_tangent(R, dR):
     q = [x * z for x in c]
     u = [x * z for x in dc]
     qu = sum(q[a] * u[a] for a in range(4))
-    return jnp.stack([u[a] - q[a] * qu for a in range(4)], axis=-1)
+    return tuple(u[a] - q[a] * qu for a in range(4))
 
 
-@_shepperd.defjvp
-def _shepperd_jvp(primals, tangents):
+@_shepperd_parts.defjvp
+def _shepperd_parts_jvp(primals, tangents):
     (R,), (dR,) = primals, tangents
-    return _shepperd(R), _shepperd_tangent(R, dR)
+    return _shepperd_parts(R), _shepperd_tangent(R, dR)
 
 
 def _k_times(cols, p):
@@ -227,4 +235,4 @@ def matrix_to_quaternion(
     check_shape(R, (3, 3), "R")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    return from_scalar_last(_from_matrix(R, method), scalar_first).astype(dt)
+    return cast(from_scalar_last(_from_matrix(R, method), scalar_first), dt)

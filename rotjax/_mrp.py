@@ -9,6 +9,7 @@ from jax.typing import ArrayLike
 
 from ._numerics import (
     as_float,
+    cast,
     check_shape,
     exponent_scale,
     from_scalar_last,
@@ -49,7 +50,7 @@ def quaternion_to_mrp(q: ArrayLike, scalar_first: bool = False) -> Array:
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     # Any finite scale: |q|^2 stays in range; NaN for the zero quaternion or a non-finite one.
-    return _scaled_vector_part(to_scalar_last(q, scalar_first), _mrp_scale, True).astype(dt)
+    return cast(_scaled_vector_part(to_scalar_last(q, scalar_first), _mrp_scale, True), dt)
 
 
 def _mrp_scale(n2, w):
@@ -97,4 +98,4 @@ def mrp_to_quaternion(mrp: ArrayLike, scalar_first: bool = False) -> Array:
     p = jnp.where(outer, -u * (s / jnp.where(outer, u2, 1.0)), p)  # double where
     p2 = jnp.sum(p * p, axis=-1, keepdims=True)
     q = jnp.concatenate([2 * p, 1 - p2], axis=-1) / (1 + p2)
-    return from_scalar_last(jnp.where(outer, -q, q), scalar_first).astype(dt)
+    return cast(from_scalar_last(jnp.where(outer, -q, q), scalar_first), dt)

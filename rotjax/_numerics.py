@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import weakref
 
 import jax
 import jax.numpy as jnp
@@ -106,6 +107,12 @@ def as_float(*xs):
     return tuple(a.astype(compute) for a in arrs), out_dtype
 
 
+def cast(x, dtype):
+    """``x`` in ``dtype``: ``x`` itself where it has that dtype already (a conversion would be
+    a new array, which :func:`unstack` would no longer recognise)."""
+    return x if x.dtype == dtype else x.astype(dtype)
+
+
 def check_shape(x, trailing: tuple[int, ...], name: str) -> None:
     """Raise `ValueError` at trace time unless `x.shape` ends with `trailing`.
 
@@ -130,12 +137,18 @@ def like_rank(c, x, dtype=None):
 
 def to_scalar_last(q, scalar_first: bool):
     """Reorder a quaternion to the internal scalar-last `(x, y, z, w)` layout."""
-    return jnp.roll(q, -1, axis=-1) if scalar_first else q
+    if not scalar_first:
+        return q
+    w, x, y, z = unstack(q)
+    return stack([x, y, z, w])
 
 
 def from_scalar_last(q, scalar_first: bool):
     """Reorder an internal scalar-last quaternion to the caller's layout."""
-    return jnp.roll(q, 1, axis=-1) if scalar_first else q
+    if not scalar_first:
+        return q
+    x, y, z, w = unstack(q)
+    return stack([w, x, y, z])
 
 
 def exponent_scale(x):
@@ -193,18 +206,88 @@ def sum_squares(xs):
     return pairwise(jnp.add, (x * x for x in xs))
 
 
-def stack_scaled(parts, scale):
-    """``(..., k)`` from ``k`` per-rotation arrays times one per-rotation ``scale``: stacked on a
-    leading axis, scaled there, moved last.
+# Trace-time record of stacked results: `stack` notes the parts of each traced array it returns,
+# and `unstack` of that very array returns them rather than reading the array back. A chain of
+# rotjax operations then passes per-rotation expressions from one to the next, and XLA fuses the
+# whole chain into one loop whatever the layout of the intermediate results (XLA does not see
+# through a stacked array read back by slices: it writes it out, or recomputes it per slice).
+# unstack(stack(parts)) == parts exactly, so values and derivatives are those of the code.
+_PARTS: dict[int, tuple[weakref.ref, tuple]] = {}
 
-    Written for XLA:CPU, which emits the stacked result as one loop over its ``k`` slots. A
-    per-rotation factor computed inside each stacked part is computed in that part's branch
-    of the loop, which LLVM can neither hoist nor vectorise (a scalar loop);
-    applied to the whole stack, it is computed once per rotation and the loop is vectorised.
-    Keep the parts cheap (components, sums of products) and put every long per-rotation
-    expression (a norm, a root, an atan) in ``scale``.
-    """
-    return jnp.moveaxis(jnp.stack(parts, axis=0) * scale[None], 0, -1)
+
+def _note(out, parts) -> None:
+    if isinstance(out, jax.core.Tracer):
+        key = id(out)
+        _PARTS[key] = (weakref.ref(out, lambda _, key=key: _PARTS.pop(key, None)), tuple(parts))
+
+
+def unstack(x):
+    """The components of ``x`` along its last axis, as per-rotation arrays: the one way rotjax
+    reads a stacked array. For an array that :func:`stack` returned in the same trace, the parts
+    it was given; else slices."""
+    hit = _PARTS.get(id(x))
+    if hit is not None and hit[0]() is x:
+        return list(hit[1])
+    return list(_read(x))
+
+
+@jax.custom_jvp
+def _read(x):
+    """The components of ``x`` (last axis) by slices; their tangents by :func:`components`
+    (the same linear map), whose transpose in reverse mode writes the cotangent of ``x`` as
+    :func:`stack` writes, in one vectorised loop (that of slices is a sum of pads)."""
+    return tuple(x[..., i] for i in range(x.shape[-1]))
+
+
+@_read.defjvp
+def _read_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    return _read(x), tuple(components(dx))
+
+
+def stack(parts, branches=False):
+    """``(..., k)`` from ``k`` per-rotation arrays: the one way rotjax writes a stacked array
+    (see :func:`unstack`).
+
+    Written as a select on the last axis among the broadcast parts: each output element
+    computes every part, so XLA:CPU's loop computes the shared per-rotation factors once and is
+    vectorised (a concatenate computes each part in a branch of its own, which LLVM neither
+    merges nor vectorises), and no transpose is left for the layout pass to turn into a copy
+    when the result is one of several outputs. ``branches``: a concatenate on a leading axis,
+    moved last, for parts that hold a root, a division or a transcendental function, which XLA
+    does not evaluate for every slot (it writes each such part in a loop of its own)."""
+    if branches:
+        out = jnp.moveaxis(jnp.stack(parts, axis=0), 0, -1)
+        _note(out, parts)
+        return out
+    shape = jnp.broadcast_shapes(*(jnp.shape(p) for p in parts))
+    out = _select_stack(tuple(jnp.broadcast_to(p, shape) for p in parts))
+    _note(out, parts)
+    return out
+
+
+@jax.custom_jvp
+def _select_stack(parts):
+    k = len(parts)
+    col = jax.lax.broadcasted_iota(jnp.int32, (*parts[0].shape, k), parts[0].ndim)
+    out = jnp.broadcast_to(parts[-1][..., None], col.shape)
+    for i in range(k - 2, -1, -1):
+        out = jnp.where(col == i, parts[i][..., None], out)
+    return out
+
+
+@_select_stack.defjvp
+def _select_stack_jvp(primals, tangents):
+    # The same linear map, written as a concatenate: its transpose (reverse mode) reads each
+    # part's cotangent by a slice, which XLA fuses into the loop that uses it (the select's
+    # transpose is a sum over the last axis per part, each a loop of its own).
+    (parts,), (dparts,) = primals, tangents
+    return _select_stack(parts), jnp.stack(dparts, axis=-1)
+
+
+def stack_scaled(parts, scale):
+    """:func:`stack` of ``parts`` each times one per-rotation ``scale``."""
+    return stack([p * scale for p in parts])
 
 
 def components(x):
@@ -232,8 +315,15 @@ def scaled_norm(x):
     before squaring, and the norm scaled back: no overflow or underflow of the squares (the
     norm of `(1e-160, 0, 0)` is `1e-160`, not 0).
     """
-    s, inv = exponent_scale(jax.lax.stop_gradient(max_abs(*jnp.moveaxis(x, -1, 0))))
-    return safe_norm(x * s[..., None]) * inv
+    return scaled_norm_parts(unstack(x))
+
+
+def scaled_norm_parts(xs):
+    """:func:`scaled_norm` of the vector with components ``xs`` (per-rotation arrays)."""
+    s, inv = exponent_scale(jax.lax.stop_gradient(max_abs(*xs)))
+    sq = sum_squares([x * s for x in xs])
+    zero = sq == 0
+    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq))) * inv  # double where
 
 
 def safe_norm(x, axis=-1):
@@ -345,6 +435,28 @@ def _check_array(name: str, value) -> None:
         raise TypeError(f"{name} must be real (float or integer), got complex {value.dtype}")
 
 
+def _traced(tree) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
+
+
+def jit(fun=None, *, static_argnames=()):
+    """``jax.jit`` for a call made with concrete arrays; inside a trace (the caller's jit,
+    grad or vmap) the function is inlined, so that the caller's program holds no nested jit per
+    call (less to trace and compile) and :func:`unstack` sees the stacked results of this call.
+    """
+    if fun is None:
+        return functools.partial(jit, static_argnames=static_argnames)
+    jitted = jax.jit(fun, static_argnames=static_argnames)
+
+    @functools.wraps(fun)
+    def call(*args, **kwargs):
+        if _traced((args, kwargs)):
+            return fun(*args, **kwargs)
+        return jitted(*args, **kwargs)
+
+    return call
+
+
 def public(fun=None, *, static=(), time_leading=()):
     """Jit-wrap a public function, with the configuration arguments it takes made static.
 
@@ -404,7 +516,7 @@ def public(fun=None, *, static=(), time_leading=()):
         bound.arguments.update(given)
         return fun(*bound.args, **bound.kwargs)
 
-    jitted = jax.jit(traced, static_argnames=static)
+    jitted = jit(traced, static_argnames=static)
 
     @functools.wraps(fun)
     def call(*args, **kwargs):

@@ -17,19 +17,20 @@ from jax.typing import ArrayLike
 
 from ._numerics import (
     as_float,
+    cast,
     check_shape,
-    components,
     from_scalar_last,
-    like_rank,
     max_abs,
     public,
     rsqrt,
     safe_atan2,
-    scaled_norm,
+    scaled_norm_parts,
+    stack,
     stack_scaled,
     sum_squares,
     to_scalar_last,
     unit_scale,
+    unstack,
 )
 
 
@@ -53,9 +54,11 @@ def _prescaled_parts(q):
     products neither overflow nor underflow, and ``s``. ``s`` is NaN where ``q`` is zero or a
     component is infinite or NaN (not a rotation): the NaN is put into the scale, which XLA
     applies inside the loop that reads ``q``, rather than into a copy of ``q``."""
-    # One split rather than four slices: its transpose (reverse mode) is one concatenate, which
-    # XLA:CPU vectorises; that of four slices is a sum of four pads, which it did not.
-    parts = [x[..., 0] for x in jnp.split(q, 4, axis=-1)]
+    return _prescale(unstack(q))
+
+
+def _prescale(parts):
+    """:func:`_prescaled_parts` of a quaternion given by its four components."""
     big = jax.lax.stop_gradient(max_abs(*parts))
     s = jnp.where((big > 0) & (big < jnp.inf), unit_scale(big), jnp.nan)
     return [x * s for x in parts], s
@@ -64,70 +67,66 @@ def _prescaled_parts(q):
 def _prescaled(q):
     """:func:`_prescaled_parts` stacked: ``q`` scaled, NaN where it is not a rotation. A
     function of the rotation gives the same result for ``q`` and for this."""
-    return _stack(_prescaled_parts(q)[0])
+    return stack(_prescaled_parts(q)[0])
 
 
-def _stack(parts):
-    """``(..., k)`` from ``k`` per-rotation arrays: stacked on a leading axis and moved last,
-    which XLA:CPU writes in one transposing loop."""
-    return jnp.moveaxis(jnp.stack(parts, axis=0), 0, -1)
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
 def _scaled_vector_part(q, scale, with_w):
     """``k q_v`` with ``k = scale(n2, w)`` a per-rotation function of the prescaled quaternion
     (see :func:`_prescaled_parts`), ``n2 = |q_v|^2`` (``|q|^2`` with ``with_w``): the
-    logarithm map and the MRP. ``k`` multiplies the stacked vector part
-    (:func:`rotjax._numerics.stack_scaled`): one vectorised loop."""
-    (x, y, z, w), _ = _prescaled_parts(q)  # NaN for the zero quaternion or a non-finite one
+    logarithm map and the MRP."""
+    return stack(_scaled_vector_parts(tuple(unstack(q)), scale, with_w))
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
+def _scaled_vector_parts(q, scale, with_w):
+    (x, y, z, w), _ = _prescale(q)  # NaN for the zero quaternion or a non-finite one
     n2 = x * x + y * y + z * z + (w * w if with_w else 0)
-    return stack_scaled([x, y, z], scale(n2, w))
+    k = scale(n2, w)
+    return k * x, k * y, k * z
 
 
-@_scaled_vector_part.defjvp
-def _scaled_vector_part_jvp(scale, with_w, primals, tangents):
+@_scaled_vector_parts.defjvp
+def _scaled_vector_parts_jvp(scale, with_w, primals, tangents):
     # JAX's derivative of the code above, grouped: with the prescaled components (s a constant
     # power of two), d(k v) = k dv + v dk, dk = 2 k_n2 (u . du) + k_w dw (u = v, or q with
-    # with_w), where k_n2 and k_w are JAX's derivatives of `scale` (forward mode, per rotation).
-    # Written for reverse mode: the tangent's components are read by `components`, so that its
-    # transpose writes each cotangent component from a per-rotation expression, in one
-    # vectorised loop (JAX's own transpose of the code above computed k in each part's branch:
-    # a scalar loop).
+    # with_w), where k_n2 and k_w are JAX's derivatives of `scale` (forward mode, per rotation):
+    # k and its two derivatives computed once per rotation, not in each component's expression.
     (q,), (dq,) = primals, tangents
-    (x, y, z, w), s = _prescaled_parts(q)  # read once: the value is the forward's, from k
+    (x, y, z, w), s = _prescale(q)
     n2 = x * x + y * y + z * z + (w * w if with_w else 0)
     ones, zeros = jnp.ones_like(n2), jnp.zeros_like(n2)
     k, k_n2 = jax.jvp(scale, (n2, w), (ones, zeros))
     _, k_w = jax.jvp(scale, (n2, w), (zeros, ones))
-    dx, dy, dz, dw = (e * s for e in components(dq))
+    dx, dy, dz, dw = (e * s for e in dq)
     dk = 2 * k_n2 * (x * dx + y * dy + z * dz + (w * dw if with_w else 0)) + k_w * dw
-    out = [k * dx + x * dk, k * dy + y * dk, k * dz + z * dk]
-    return stack_scaled([x, y, z], k), jnp.stack(out, axis=-1)
+    out = (k * dx + x * dk, k * dy + y * dk, k * dz + z * dk)
+    return (k * x, k * y, k * z), out
 
 
 def _multiply(p, q):
     """Hamilton product of scalar-last quaternions (no normalisation)."""
-    px, py, pz, pw = jnp.moveaxis(p, -1, 0)
-    qx, qy, qz, qw = jnp.moveaxis(q, -1, 0)
-    return jnp.stack(
+    px, py, pz, pw = unstack(p)
+    qx, qy, qz, qw = unstack(q)
+    return stack(
         [
             pw * qx + px * qw + py * qz - pz * qy,
             pw * qy - px * qz + py * qw + pz * qx,
             pw * qz + px * qy - py * qx + pz * qw,
             pw * qw - px * qx - py * qy - pz * qz,
-        ],
-        axis=-1,
+        ]
     )
 
 
 def _conjugate(q):
-    return q * like_rank([-1, -1, -1, 1], q)
+    x, y, z, w = unstack(q)
+    return stack([-x, -y, -z, w])
 
 
 def _normalize(q):
     """`q / |q|` for `q` at any finite scale (`_prescaled` first); NaN for the zero
     quaternion (0/0, on purpose: it is not a rotation) and for a non-finite component."""
-    return _renormalize(_prescaled(q))
+    p, _ = _prescaled_parts(q)
+    return stack_scaled(p, rsqrt(sum_squares(p)))
 
 
 def _renormalize(q):
@@ -135,13 +134,13 @@ def _renormalize(q):
     an integrator, a product): no scaling, whose cost would be that of the step. The squared
     norm is a sum of four squares: XLA:CPU runs a reduction over the last axis as a loop of its
     own."""
-    x, y, z, w = jnp.moveaxis(q, -1, 0)
-    return q / jnp.sqrt(x * x + y * y + z * z + w * w)[..., None]
+    p = unstack(q)
+    return stack_scaled(p, rsqrt(sum_squares(p)))
 
 
 def _to_matrix(q):
     """Rotation matrix of a scalar-last quaternion of any non-zero norm."""
-    return _to_matrix_parts(*(q[..., i] for i in range(4)))
+    return _to_matrix_parts(*unstack(q))
 
 
 def _to_matrix_parts(x, y, z, w):
@@ -165,9 +164,9 @@ def _to_matrix_parts(x, y, z, w):
 def _angle(q):
     """Rotation angle in [0, pi] of a scalar-last quaternion of any finite norm (NaN for zero
     or a non-finite component)."""
-    q = _prescaled(q)  # |w| and n of order 1: the derivative of atan2 cannot underflow
-    w = jnp.abs(q[..., 3])
-    n = scaled_norm(q[..., :3])  # 1e-160 stays 1e-160: atan2 is a ratio, scale-free
+    (x, y, z, w), _ = _prescaled_parts(q)  # |w|, n of order 1: atan2's derivative is finite
+    w = jnp.abs(w)
+    n = scaled_norm_parts([x, y, z])  # 1e-160 stays 1e-160: atan2 is a ratio, scale-free
     # NaN for the zero quaternion: atan2(0, 0) = 0 would pass for the identity; and for an
     # infinite component, where atan2 would return a finite angle.
     bad = ((n == 0) & (w == 0)) | ~jnp.isfinite(n + w)
@@ -201,7 +200,7 @@ def quaternion_to_matrix(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return _to_matrix_parts(*_prescaled_parts(q)[0]).astype(dt)
+    return cast(_to_matrix_parts(*_prescaled_parts(q)[0]), dt)
 
 
 @public
@@ -228,7 +227,7 @@ def quaternion_multiply(p: ArrayLike, q: ArrayLike, scalar_first: bool = False) 
         ```
     """
     p, q, dt = _prep2(p, q, scalar_first)
-    return from_scalar_last(_multiply(p, q), scalar_first).astype(dt)
+    return cast(from_scalar_last(_multiply(p, q), scalar_first), dt)
 
 
 @public
@@ -251,7 +250,7 @@ def quaternion_conjugate(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return from_scalar_last(_conjugate(q), scalar_first).astype(dt)
+    return cast(from_scalar_last(_conjugate(q), scalar_first), dt)
 
 
 @public
@@ -280,7 +279,7 @@ def quaternion_inverse(q: ArrayLike, scalar_first: bool = False) -> Array:
     (x, y, z, w), s = _prescaled_parts(q)  # conj(q) / |q|^2 = s conj(s q) / |s q|^2
     r = rsqrt(x * x + y * y + z * z + w * w)
     k = s * r * r
-    return from_scalar_last(_stack([-x * k, -y * k, -z * k, w * k]), scalar_first).astype(dt)
+    return cast(from_scalar_last(stack([-x * k, -y * k, -z * k, w * k]), scalar_first), dt)
 
 
 @public
@@ -303,7 +302,7 @@ def quaternion_normalize(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return from_scalar_last(_normalize(q), scalar_first).astype(dt)
+    return cast(from_scalar_last(_normalize(q), scalar_first), dt)
 
 
 @public
@@ -330,7 +329,7 @@ def quaternion_apply(q: ArrayLike, v: ArrayLike, scalar_first: bool = False) -> 
     (q, v), dt = as_float(q, v)
     check_shape(q, (4,), "q")
     check_shape(v, (3,), "v")
-    return _apply(to_scalar_last(q, scalar_first), v).astype(dt)
+    return cast(_apply(to_scalar_last(q, scalar_first), v), dt)
 
 
 def _turn(p, v):
@@ -343,37 +342,37 @@ def _turn(p, v):
     return [w * t0 + (y * t2 - z * t1), w * t1 + (z * t0 - x * t2), w * t2 + (x * t1 - y * t0)]
 
 
-@jax.custom_jvp
 def _apply(q, v):
     """``R(q) v`` for a scalar-last ``q`` of any finite non-zero norm (see quaternion_apply)."""
-    p, _ = _prescaled_parts(q)
+    return stack(_apply_parts(tuple(unstack(q)), tuple(unstack(v))))
+
+
+@jax.custom_jvp
+def _apply_parts(q, v):
+    p, _ = _prescale(q)
     r = rsqrt(sum_squares(p))  # the unit quaternion, on per-rotation scalars
-    a, b, c = (v[..., i] for i in range(3))
-    d = _turn([x * r for x in p], [a, b, c])
-    return _stack([a + d[0], b + d[1], c + d[2]])
+    d = _turn([x * r for x in p], v)
+    return tuple(a + b for a, b in zip(v, d, strict=True))
 
 
-@_apply.defjvp
-def _apply_jvp(primals, tangents):
+@_apply_parts.defjvp
+def _apply_parts_jvp(primals, tangents):
     # JAX's derivative of the code above, grouped. With p the prescaled quaternion (s a
     # constant power of two), r = 1 / |p| and T = _turn (T(u, v) = r^2 T(p, v) for u = r p):
     # d out = dv + r^2 T(p, dv) + r^2 s T'(p, v)[dq] - 2 r^4 s (p . dq) T(p, v),
     # T' the derivative in p (linear in both), T'(p, v)[p] = 2 T(p, v), and
-    # du = r s (dq - r^2 p (p . dq)). Written for reverse mode: the tangents' components are
-    # read by components, and every cotangent component is then a per-rotation expression
-    # that XLA computes once per rotation. JAX's own transpose of the code above wrote the
-    # cotangent of q in four loops, each computing the whole chain again.
-    (q, v), (dq, dv) = primals, tangents
-    p, s = _prescaled_parts(q)
+    # du = r s (dq - r^2 p (p . dq)): every component a per-rotation expression, r computed
+    # once (JAX's own transpose of the code above wrote the cotangent of q in four loops, each
+    # computing the whole chain again).
+    (q, v), (d, e) = primals, tangents
+    p, s = _prescale(q)
     r2 = rsqrt(sum_squares(p)) ** 2
-    vs = [v[..., i] for i in range(3)]
-    e, d = components(dv), components(dq)
     by_v = _turn(p, e)  # T(p, dv): linear in dv
-    by_q = jax.jvp(lambda u: _turn(u, vs), (p,), (d,))[1]  # T'(p, v)[dq]
+    by_q = jax.jvp(lambda u: _turn(u, v), (p,), (list(d),))[1]  # T'(p, v)[dq]
     m = (2 * s) * (r2 * r2) * sum(x * dx for x, dx in zip(p, d, strict=True))
-    turn = _turn(p, vs)
-    out = [e[a] + r2 * by_v[a] + (r2 * s) * by_q[a] - m * turn[a] for a in range(3)]
-    return _apply(q, v), jnp.stack(out, axis=-1)
+    turn = _turn(p, v)
+    out = tuple(e[a] + r2 * by_v[a] + (r2 * s) * by_q[a] - m * turn[a] for a in range(3))
+    return _apply_parts(q, v), out
 
 
 @public
@@ -406,7 +405,7 @@ def relative_rotation(q_a: ArrayLike, q_b: ArrayLike, scalar_first: bool = False
     """
     qa, qb, dt = _prep2(q_a, q_b, scalar_first, ("q_a", "q_b"))
     rel = _renormalize(_multiply(_conjugate(_prescaled(qa)), _prescaled(qb)))
-    return from_scalar_last(rel, scalar_first).astype(dt)
+    return cast(from_scalar_last(rel, scalar_first), dt)
 
 
 @public
@@ -437,7 +436,7 @@ def rotation_angle(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return _angle(q).astype(dt)
+    return cast(_angle(q), dt)
 
 
 @public
@@ -467,4 +466,4 @@ def angle_between(p: ArrayLike, q: ArrayLike, scalar_first: bool = False) -> Arr
         ```
     """
     p, q, dt = _prep2(p, q, scalar_first)
-    return _angle(_multiply(_conjugate(_prescaled(p)), _prescaled(q))).astype(dt)
+    return cast(_angle(_multiply(_conjugate(_prescaled(p)), _prescaled(q))), dt)

@@ -7,7 +7,6 @@ function of those arrays, built on rotjax's quaternion and rotation-vector funct
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 
 import jax
@@ -18,7 +17,7 @@ from jax.typing import ArrayLike, DTypeLike
 
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
-from ._numerics import cross, matvec, max_abs, public, to_scalar_last, unit_scale
+from ._numerics import cross, jit, matvec, max_abs, public, to_scalar_last, unit_scale
 from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix
 from ._rotation import Rotation, _concrete, _float, _identity_quat, _input, _Sequence
 from ._rotvec import _quat_to_rotvec
@@ -59,7 +58,7 @@ def _bcast(*arrays):
     return tuple(jnp.broadcast_to(a, shape + a.shape[-1:]) for a in arrays)
 
 
-@functools.partial(jax.jit, static_argnames="normalize")
+@jit(static_argnames="normalize")
 def _from_matrix(m, normalize):
     # Rotation part: the nearest rotation (Frobenius norm), as Rotation.from_matrix; a 3x3
     # block with det <= 0 or a last row other than [0, 0, 0, 1] gives NaN (scipy raises, or
@@ -78,7 +77,7 @@ def _from_matrix(m, normalize):
     return jnp.where(ok, q, jnp.nan), jnp.where(ok, t, jnp.nan)
 
 
-@jax.jit
+@jit
 def _as_matrix(q, t):
     # NaN in the quaternion reaches the last row too (0 |w| is +0 or NaN), as in scipy.
     zero = 0 * jnp.abs(q[..., 3])
@@ -87,19 +86,19 @@ def _as_matrix(q, t):
     return jnp.concatenate([top, bottom[..., None, :]], axis=-2)
 
 
-@jax.jit
+@jit
 def _compose(q1, t1, q2, t2):
     q1, t1, q2, t2 = _bcast(q1, t1, q2, t2)
     return _renormalize(_multiply(q1, q2)), t1 + _rotate(q1, t2)
 
 
-@jax.jit
+@jit
 def _inv(q, t):
     qc = _conjugate(q)
     return qc, -_rotate(qc, t)
 
 
-@functools.partial(jax.jit, static_argnames="inverse")
+@jit(static_argnames="inverse")
 def _apply(q, t, v, inverse):
     batch = np.broadcast_shapes(q.shape[:-1], v.shape[:-1])
     if inverse:
@@ -113,17 +112,17 @@ def _apply(q, t, v, inverse):
     return _rotate(q, v) + t
 
 
-@jax.jit
+@jit
 def _from_exp_coords(xi):
     return _exp(xi)
 
 
-@jax.jit
+@jit
 def _as_exp_coords(q, t):
     return _log(q, t)
 
 
-@jax.jit
+@jit
 def _pow(q, t, n):
     xi = _log(q, t)
     return _exp(n[..., None] * xi)
@@ -146,7 +145,7 @@ def _normalize_dq(real, dual):
     return real, dual - jnp.sum(real * dual, axis=-1, keepdims=True) * real
 
 
-@functools.partial(jax.jit, static_argnames="scalar_first")
+@jit(static_argnames="scalar_first")
 def _from_dual_quat(dq, scalar_first):
     real = to_scalar_last(dq[..., :4], scalar_first)
     dual = to_scalar_last(dq[..., 4:], scalar_first)
@@ -154,7 +153,7 @@ def _from_dual_quat(dq, scalar_first):
     return real, 2 * _multiply(dual, _conjugate(real))[..., :3]
 
 
-@functools.partial(jax.jit, static_argnames="scalar_first")
+@jit(static_argnames="scalar_first")
 def _as_dual_quat(q, t, scalar_first):
     tq = jnp.concatenate([t, jnp.zeros_like(t[..., :1])], axis=-1)
     dual = 0.5 * _multiply(tq, q)
@@ -163,7 +162,7 @@ def _as_dual_quat(q, t, scalar_first):
     return jnp.concatenate([q, dual], axis=-1)
 
 
-@jax.jit
+@jit
 def _mean(q, t, w):
     """Means over the second-to-last axis: ``q`` ``(..., N, 4)``, ``t`` ``(..., N, 3)``,
     ``w`` ``(..., N)`` or ``None``; a negative weight gives NaN for its set."""

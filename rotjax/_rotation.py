@@ -6,7 +6,6 @@ bookkeeping and method names; every computation is one of rotjax's functions.
 
 from __future__ import annotations
 
-import functools
 import warnings
 from collections.abc import Sequence
 
@@ -30,7 +29,7 @@ from ._fitting import quaternion_mean
 from ._kinematics import quaternion_derivative_to_angular_velocity
 from ._matrix import matrix_to_quaternion
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
-from ._numerics import _check_array, _check_static, cross, matvec, safe_atan2, to_scalar_last
+from ._numerics import _check_array, _check_static, cross, jit, matvec, safe_atan2, to_scalar_last
 from ._quaternion import (
     _multiply,
     _prescaled,
@@ -96,12 +95,12 @@ def _broadcast(*arrays, trailing, what="Cannot broadcast the batch shapes"):
         )
         raise ValueError(f"{what} {shapes}") from None
     return tuple(
-        jnp.broadcast_to(a, shape + a.shape[a.ndim - t :])
+        a if a.shape[: a.ndim - t] == shape else jnp.broadcast_to(a, shape + a.shape[a.ndim - t :])
         for a, t in zip(arrays, trailing, strict=True)
     )
 
 
-@jax.jit
+@jit
 def _from_matrix_checked(matrix):
     # scipy raises for det <= 0; a traced function cannot, so those rotations are NaN.
     q = matrix_to_quaternion(matrix, method="optimal")
@@ -109,12 +108,12 @@ def _from_matrix_checked(matrix):
     return jnp.where((det > 0)[..., None], q, jnp.nan)
 
 
-@functools.partial(jax.jit, static_argnames="scalar_first")
+@jit(static_argnames="scalar_first")
 def _scalar_last(q, scalar_first):
     return to_scalar_last(_float(q), scalar_first)
 
 
-@jax.jit
+@jit
 def _compose(p, q):
     # The stored quaternions need not be unit: the product of the prescaled ones is of order
     # 1, and normalising it gives the unit quaternion of the composition.
@@ -122,7 +121,7 @@ def _compose(p, q):
     return _renormalize(_multiply(_prescaled(p), _prescaled(q)))
 
 
-@functools.partial(jax.jit, static_argnames="inverse")
+@jit(static_argnames="inverse")
 def _apply(q, v, inverse):
     if inverse:
         q = quaternion_conjugate(q)
@@ -1218,7 +1217,7 @@ class Rotation(_Sequence):
         return reduced
 
 
-@jax.jit
+@jit
 def _align(a, b, w):
     """`align_vectors` with scipy's infinite-weight rule; `(N, 3)`, `(N, 3)`, `(N,)`."""
     n = a.shape[0]
@@ -1390,7 +1389,7 @@ class Slerp:
         )
 
 
-@jax.jit
+@jit
 def _slerp_eval(times, timedelta, quat, rotvecs, t):
     n = times.shape[0]
     idx = jnp.clip(jnp.searchsorted(times, t, side="right") - 1, 0, n - 2)
@@ -1433,7 +1432,7 @@ def _quadratic_term(phi, phi_dot):
 _SPLINE_ITERATIONS = 10
 
 
-@jax.jit
+@jit
 def _spline_coefficients(times, quat):
     h = jnp.diff(times)
     r = quaternion_to_rotvec(quaternion_multiply(quaternion_conjugate(quat[:-1]), quat[1:]))
@@ -1559,7 +1558,7 @@ class RotationSpline:
         return Rotation._raw(out) if order == 0 else out
 
 
-@functools.partial(jax.jit, static_argnames="order")
+@jit(static_argnames="order")
 def _spline_eval(times, quat, coeffs, t, order):
     c3, c2, c1 = coeffs
     idx = jnp.clip(jnp.searchsorted(times, t, side="right") - 1, 0, times.shape[0] - 2)

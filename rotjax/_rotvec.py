@@ -11,8 +11,8 @@ from jax.typing import ArrayLike
 from ._matrix import _from_matrix
 from ._numerics import (
     as_float,
+    cast,
     check_shape,
-    components,
     eps,
     exponent_scale,
     from_scalar_last,
@@ -23,7 +23,9 @@ from ._numerics import (
     rsqrt,
     safe_norm,
     select,
+    stack,
     to_scalar_last,
+    unstack,
 )
 from ._quaternion import _angle, _prescaled, _scaled_vector_part
 
@@ -105,34 +107,32 @@ def _exp_coeffs(theta2):
     return k, c
 
 
-@jax.custom_jvp
 def _rotvec_to_quat(v):
-    """`(k v, c)` with `k, c = _exp_coeffs(|v|^2)`. theta^2 from the three components
-    (jnp.sum would be a loop of its own), and `k` and `c` applied to whole rows of the
-    stacked result (see :func:`rotjax._numerics.stack_scaled`): one vectorised loop."""
-    x, y, z = (v[..., i] for i in range(3))
+    """`(k v, c)` with `k, c = _exp_coeffs(|v|^2)`: the exponential map, scalar last."""
+    return stack(_rotvec_to_quat_parts(tuple(unstack(v))))
+
+
+@jax.custom_jvp
+def _rotvec_to_quat_parts(v):
+    x, y, z = v
     k, c = _exp_coeffs(x * x + y * y + z * z)
-    row = jax.lax.broadcasted_iota(jnp.int32, (4,) + (1,) * (v.ndim - 1), 0)
-    rows = jnp.stack([x, y, z, jnp.zeros_like(x)], axis=0) * k[None]
-    return jnp.moveaxis(jnp.where(row == 3, c[None], rows), 0, -1)
+    return k * x, k * y, k * z, c
 
 
-@_rotvec_to_quat.defjvp
-def _rotvec_to_quat_jvp(primals, tangents):
+@_rotvec_to_quat_parts.defjvp
+def _rotvec_to_quat_parts_jvp(primals, tangents):
     # JAX's derivative of the code above, grouped: d(k v) = k dv + v dk and dc, with
-    # dk = 2 k' (v . dv), dc = 2 c' (v . dv) and k', c' JAX's derivatives of _exp_coeffs.
-    # Written for reverse mode as _scaled_vector_part's rule (rotjax._quaternion), the tangent
-    # read by `components`. JAX's own transpose of the code above was a scalar loop in float64
-    # (a function outlined per component).
-    (v,), (dv,) = primals, tangents
-    x, y, z = (v[..., i] for i in range(3))
+    # dk = 2 k' (v . dv), dc = 2 c' (v . dv) and k', c' JAX's derivatives of _exp_coeffs,
+    # computed once per rotation (JAX's own transpose of the code above was a scalar loop in
+    # float64: a function outlined per component).
+    (v,), ((dx, dy, dz),) = primals, tangents
+    x, y, z = v
     t2 = x * x + y * y + z * z
     (k, c), (dk2, dc2) = jax.jvp(_exp_coeffs, (t2,), (2 * jnp.ones_like(t2),))
-    dx, dy, dz = components(dv)
     vd = x * dx + y * dy + z * dz
     dk = dk2 * vd
-    out = [k * dx + x * dk, k * dy + y * dk, k * dz + z * dk, dc2 * vd]
-    return _rotvec_to_quat(v), jnp.stack(out, axis=-1)
+    out = (k * dx + x * dk, k * dy + y * dk, k * dz + z * dk, dc2 * vd)
+    return (k * x, k * y, k * z, c), out
 
 
 # f(u) = atan(sqrt(u)) / sqrt(u) on [0, 1]: Chebyshev fits (mpmath.chebyfit at 40 digits) of
@@ -233,7 +233,7 @@ def rotvec_to_quaternion(
     check_shape(v, (3,), "rotvec")
     if degrees:
         v = jnp.deg2rad(v)
-    return from_scalar_last(_rotvec_to_quat(v), scalar_first).astype(dt)
+    return cast(from_scalar_last(_rotvec_to_quat(v), scalar_first), dt)
 
 
 @public
@@ -269,7 +269,7 @@ def quaternion_to_rotvec(q: ArrayLike, degrees: bool = False, scalar_first: bool
     v = _quat_to_rotvec(to_scalar_last(q, scalar_first))
     if degrees:
         v = jnp.rad2deg(v)
-    return v.astype(dt)
+    return cast(v, dt)
 
 
 @public
@@ -308,7 +308,7 @@ def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
     b = (2 * k * k)[..., None, None]
     K = hat(v)
     eye = like_rank(jnp.eye(3, dtype=v.dtype), K)
-    return (eye + a * K + b * matmul(K, K)).astype(dt)
+    return cast((eye + a * K + b * matmul(K, K)), dt)
 
 
 @public
@@ -343,7 +343,7 @@ def matrix_to_rotvec(R: ArrayLike, degrees: bool = False) -> Array:
     v = _quat_to_rotvec(_from_matrix(R, "shepperd"))
     if degrees:
         v = jnp.rad2deg(v)
-    return v.astype(dt)
+    return cast(v, dt)
 
 
 @public
@@ -377,7 +377,7 @@ def axis_angle_to_quaternion(
     n = jnp.broadcast_to(axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True)), (*batch, 3))
     half = jnp.broadcast_to(angle, batch)[..., None] / 2
     q = jnp.concatenate([jnp.sin(half) * n, jnp.cos(half)], axis=-1)
-    return from_scalar_last(q, scalar_first).astype(dt)
+    return cast(from_scalar_last(q, scalar_first), dt)
 
 
 @public
@@ -429,4 +429,4 @@ def quaternion_to_axis_angle(
     axis = jnp.where(jnp.isnan(angle)[..., None], jnp.nan, axis)
     if degrees:
         angle = jnp.rad2deg(angle)
-    return axis.astype(dt), angle.astype(dt)
+    return cast(axis.astype(dt), angle, dt)

@@ -21,7 +21,7 @@ from jax.typing import ArrayLike
 
 from . import _numerics as nm
 from ._matrix import _from_matrix
-from ._numerics import as_float, check_shape, eps, matmul, public
+from ._numerics import as_float, cast, check_shape, eps, matmul, public
 from ._quaternion import _prescaled
 from ._rotvec import _exp_coeffs
 
@@ -190,10 +190,10 @@ def hat(v: ArrayLike) -> Array:
     if v.ndim < 1 or v.shape[-1] not in (3, 6):
         raise ValueError(f"v: expected shape (..., 3) or (..., 6), got {tuple(v.shape)}")
     if v.shape[-1] == 3:
-        return nm.hat(v).astype(dt)
+        return cast(nm.hat(v), dt)
     top = jnp.concatenate([nm.hat(v[..., :3]), v[..., 3:, None]], axis=-1)
     out = jnp.concatenate([top, jnp.zeros_like(top[..., :1, :])], axis=-2)
-    return out.astype(dt)
+    return cast(out, dt)
 
 
 @public
@@ -224,7 +224,7 @@ def vee(M: ArrayLike) -> Array:
     w = nm.vee(M[..., :3, :3])
     if M.shape[-1] == 4:
         w = jnp.concatenate([w, M[..., :3, 3]], axis=-1)
-    return w.astype(dt)
+    return cast(w, dt)
 
 
 @public
@@ -253,7 +253,7 @@ def so3_left_jacobian(rotvec: ArrayLike) -> Array:
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
-    return _combo(*_left(p), p).astype(dt)
+    return cast(_combo(*_left(p), p), dt)
 
 
 @public
@@ -285,7 +285,7 @@ def so3_right_jacobian(rotvec: ArrayLike) -> Array:
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
     alpha, a, b = _left(p)
-    return _combo(alpha, -a, b, p).astype(dt)
+    return cast(_combo(alpha, -a, b, p), dt)
 
 
 @public
@@ -314,7 +314,7 @@ def so3_left_jacobian_inverse(rotvec: ArrayLike) -> Array:
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
     g, e = _inv_coeffs(p)
-    return _combo(g, jnp.full_like(g, -0.5), e, p).astype(dt)
+    return cast(_combo(g, jnp.full_like(g, -0.5), e, p), dt)
 
 
 @public
@@ -342,7 +342,7 @@ def so3_right_jacobian_inverse(rotvec: ArrayLike) -> Array:
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
     g, e = _inv_coeffs(p)
-    return _combo(g, jnp.full_like(g, 0.5), e, p).astype(dt)
+    return cast(_combo(g, jnp.full_like(g, 0.5), e, p), dt)
 
 
 def _exp(xi):
@@ -393,7 +393,7 @@ def se3_exp(xi: ArrayLike) -> Array:
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
-    return _homogeneous(*_exp(xi)).astype(dt)
+    return cast(_homogeneous(*_exp(xi)), dt)
 
 
 def _log(R, t):
@@ -449,7 +449,7 @@ def se3_log(T: ArrayLike) -> Array:
     """
     (T,), dt = as_float(T)
     check_shape(T, (4, 4), "T")
-    return _log(T[..., :3, :3], T[..., :3, 3]).astype(dt)
+    return cast(_log(T[..., :3, :3], T[..., :3, 3]), dt)
 
 
 @public
@@ -479,7 +479,7 @@ def se3_adjoint(T: ArrayLike) -> Array:
     (T,), dt = as_float(T)
     check_shape(T, (4, 4), "T")
     R, t = T[..., :3, :3], T[..., :3, 3]
-    return _blocks(R, matmul(nm.hat(t), R), R).astype(dt)
+    return cast(_blocks(R, matmul(nm.hat(t), R), R), dt)
 
 
 @public
@@ -515,7 +515,7 @@ def se3_left_jacobian(xi: ArrayLike) -> Array:
     check_shape(xi, (6,), "xi")
     p, r = _split_xi(xi)
     J = _combo(*_left(p), p)
-    return _blocks(J, _q_matrix(p, r), J).astype(dt)
+    return cast(_blocks(J, _q_matrix(p, r), J), dt)
 
 
 @public
@@ -543,7 +543,7 @@ def se3_right_jacobian(xi: ArrayLike) -> Array:
     check_shape(xi, (6,), "xi")
     p, r = _split_xi(-xi)
     J = _combo(*_left(p), p)
-    return _blocks(J, _q_matrix(p, r), J).astype(dt)
+    return cast(_blocks(J, _q_matrix(p, r), J), dt)
 
 
 def _left_inverse(p, r):
@@ -577,7 +577,7 @@ def se3_left_jacobian_inverse(xi: ArrayLike) -> Array:
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
-    return _left_inverse(*_split_xi(xi)).astype(dt)
+    return cast(_left_inverse(*_split_xi(xi)), dt)
 
 
 @public
@@ -605,4 +605,4 @@ def se3_right_jacobian_inverse(xi: ArrayLike) -> Array:
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
-    return _left_inverse(*_split_xi(-xi)).astype(dt)
+    return cast(_left_inverse(*_split_xi(-xi)), dt)

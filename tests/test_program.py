@@ -32,13 +32,11 @@ CASES = {
     "matrix_to_quaternion": (
         rj.matrix_to_quaternion, [(3, 3)], (1, BYTES_SLACK, 180), (1, BYTES_SLACK, 470)
     ),
-    # The gradient writes the Shepperd column once and reads it in quaternion_to_euler's rule
-    # (6 smaller loops, several reading R, rather than 3 that each extract the column again).
     "matrix_to_euler": (
-        lambda R: rj.matrix_to_euler(R, SEQ), [(3, 3)], (1, BYTES_SLACK, 500), (6, 4.5, 1310)
+        lambda R: rj.matrix_to_euler(R, SEQ), [(3, 3)], (1, BYTES_SLACK, 500), (1, BYTES_SLACK, 780)
     ),
     "quaternion_to_euler": (
-        lambda q: rj.quaternion_to_euler(q, SEQ), [(4,)], (2, 1.9, 370), (5, 2.3, 410)
+        lambda q: rj.quaternion_to_euler(q, SEQ), [(4,)], (1, BYTES_SLACK, 370), (5, 2.3, 410)
     ),
     "quaternion_to_matrix": (
         rj.quaternion_to_matrix, [(4,)], (1, BYTES_SLACK, 90), (1, BYTES_SLACK, 170)
@@ -56,7 +54,7 @@ CASES = {
         rj.quaternion_inverse, [(4,)], (1, BYTES_SLACK, 75), (1, BYTES_SLACK, 115)
     ),
     "rotvec_to_quaternion": (
-        rj.rotvec_to_quaternion, [(3,)], (1, BYTES_SLACK, 115), (1, BYTES_SLACK, 210)
+        rj.rotvec_to_quaternion, [(3,)], (1, BYTES_SLACK, 135), (1, BYTES_SLACK, 210)
     ),
 }  # fmt: skip
 
