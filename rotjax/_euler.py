@@ -25,6 +25,7 @@ from ._numerics import (
     unstack,
 )
 from ._quaternion import _multiply, _to_matrix
+from ._rotvec import _sin_cos
 
 _VALID = (
     "three axis letters with no two consecutive equal, all uppercase for intrinsic "
@@ -71,8 +72,7 @@ def _prep_angles(angles, degrees):
 
 def _elementary(axis: int, angle):
     """Scalar-last quaternion of a rotation by `angle` about coordinate axis `axis`."""
-    half = angle / 2
-    s, c = jnp.sin(half), jnp.cos(half)
+    s, c = _sin_cos(angle / 2)  # multiplications and additions: fuses into its consumers
     z = jnp.zeros_like(s)
     comps = [z, z, z, c]
     comps[axis] = s

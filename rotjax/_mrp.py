@@ -13,10 +13,14 @@ from ._numerics import (
     check_shape,
     exponent_scale,
     from_scalar_last,
+    max_abs,
     public,
     rsqrt,
     select,
+    stack,
+    sum_squares,
     to_scalar_last,
+    unstack,
 )
 from ._quaternion import _scaled_vector_part
 
@@ -87,15 +91,20 @@ def mrp_to_quaternion(mrp: ArrayLike, scalar_first: bool = False) -> Array:
     """
     (p,), dt = as_float(mrp)
     check_shape(p, (3,), "mrp")
-    p2 = jnp.sum(p * p, axis=-1, keepdims=True)
+    p = unstack(p)
     # Beyond |p| = 1 the same rotation's other MRP, p' = -p / |p|^2 (|p'| < 1), gives
     # q(p) = -q(p'): |p|^2 could overflow (|p| > 1e154 in float64). p / |p|^2 is formed from
     # p scaled by a power of two s (exact): s^2 (s p) / |s p|^2, each factor in range.
-    outer = p2 > 1
-    s, _ = exponent_scale(jax.lax.stop_gradient(jnp.max(jnp.abs(p), axis=-1, keepdims=True)))
-    u = p * s
-    u2 = jnp.sum(u * u, axis=-1, keepdims=True)
-    p = jnp.where(outer, -u * (s / jnp.where(outer, u2, 1.0)), p)  # double where
-    p2 = jnp.sum(p * p, axis=-1, keepdims=True)
-    q = jnp.concatenate([2 * p, 1 - p2], axis=-1) / (1 + p2)
-    return cast(from_scalar_last(jnp.where(outer, -q, q), scalar_first), dt)
+    # Reciprocals by rsqrt (multiplications and additions: see its note; both arguments are
+    # at least 1), so that the conversion stays one loop alone and composed.
+    outer = sum_squares(p) > 1
+    s, _ = exponent_scale(jax.lax.stop_gradient(max_abs(*p)))
+    u = [x * s for x in p]
+    r = rsqrt(jnp.where(outer, sum_squares(u), 1.0))  # double where; |s p|^2 is in [1, 12)
+    f = -s * (r * r)
+    p = [jnp.where(outer, x * f, y) for x, y in zip(u, p, strict=True)]
+    p2 = sum_squares(p)  # at most 1
+    r = rsqrt(1 + p2)
+    k = jnp.where(outer, -(r * r), r * r)
+    q = [(2 * k) * x for x in p] + [(1 - p2) * k]
+    return cast(from_scalar_last(stack(q), scalar_first), dt)

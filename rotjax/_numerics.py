@@ -285,6 +285,25 @@ def _select_stack_jvp(primals, tangents):
     return _select_stack(parts), jnp.stack(dparts, axis=-1)
 
 
+def stack_matrix(rows):
+    """``(..., 3, 3)`` from three rows of three per-rotation arrays, written as :func:`stack`
+    writes (its nine entries, row by row); :func:`unstack_matrix` reads them back."""
+    entries = [x for row in rows for x in row]
+    flat = stack(entries)
+    out = flat.reshape(*flat.shape[:-1], 3, 3)
+    _note(out, entries)
+    return out
+
+
+def unstack_matrix(R):
+    """The nine entries of a ``(..., 3, 3)`` matrix, row by row, as per-rotation arrays (see
+    :func:`unstack`)."""
+    hit = _PARTS.get(id(R))
+    if hit is not None and hit[0]() is R:
+        return list(hit[1])
+    return list(_read(R.reshape(*R.shape[:-2], 9)))
+
+
 def stack_scaled(parts, scale):
     """:func:`stack` of ``parts`` each times one per-rotation ``scale``."""
     return stack([p * scale for p in parts])
@@ -355,8 +374,7 @@ def hat(v):
     x, y, z = jnp.moveaxis(v, -1, 0)
     o = jnp.zeros_like(x)
     rows = ((o, -z, y), (z, o, -x), (-y, x, o))
-    # Nested stacks, not a flat stack of nine: XLA:CPU then writes the matrix in one loop.
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+    return stack_matrix(rows)
 
 
 def vee(m):

@@ -26,6 +26,7 @@ from ._numerics import (
     safe_atan2,
     scaled_norm_parts,
     stack,
+    stack_matrix,
     stack_scaled,
     sum_squares,
     to_scalar_last,
@@ -158,7 +159,7 @@ def _to_matrix_parts(x, y, z, w):
         (xz - yw, yz + xw, one - xx - yy),
     )
     # Three rows of three, stacked twice: XLA:CPU writes the matrix in one loop.
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+    return stack_matrix(rows)
 
 
 def _angle(q):

@@ -17,8 +17,18 @@ from jax.typing import ArrayLike, DTypeLike
 
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
-from ._numerics import cross, jit, matvec, max_abs, public, to_scalar_last, unit_scale
-from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix
+from ._numerics import (
+    cross,
+    jit,
+    matvec,
+    max_abs,
+    public,
+    stack,
+    to_scalar_last,
+    unit_scale,
+    unstack,
+)
+from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix, _turn
 from ._rotation import Rotation, _concrete, _float, _identity_quat, _input, _Sequence
 from ._rotvec import _quat_to_rotvec
 from ._se3 import _combo_apply, _inv_coeffs, _so3_coeffs
@@ -31,9 +41,8 @@ from ._se3 import _combo_apply, _inv_coeffs, _so3_coeffs
 
 def _rotate(q, v):
     """``R(q) v`` for a unit scalar-last ``q``, both of one batch shape."""
-    u, w = q[..., :3], q[..., 3:]
-    t = 2 * cross(u, v)
-    return v + w * t + cross(u, t)
+    v = unstack(v)
+    return stack([a + d for a, d in zip(v, _turn(unstack(q), v), strict=True)])
 
 
 def _exp(xi):
@@ -55,7 +64,9 @@ def _log(q, t):
 def _bcast(*arrays):
     """Broadcast the batch shapes (all but the last axis) explicitly."""
     shape = np.broadcast_shapes(*(a.shape[:-1] for a in arrays))
-    return tuple(jnp.broadcast_to(a, shape + a.shape[-1:]) for a in arrays)
+    return tuple(
+        a if a.shape[:-1] == shape else jnp.broadcast_to(a, shape + a.shape[-1:]) for a in arrays
+    )
 
 
 @jit(static_argnames="normalize")

@@ -429,4 +429,4 @@ def quaternion_to_axis_angle(
     axis = jnp.where(jnp.isnan(angle)[..., None], jnp.nan, axis)
     if degrees:
         angle = jnp.rad2deg(angle)
-    return cast(axis.astype(dt), angle, dt)
+    return cast(axis, dt), cast(angle, dt)

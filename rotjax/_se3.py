@@ -21,7 +21,7 @@ from jax.typing import ArrayLike
 
 from . import _numerics as nm
 from ._matrix import _from_matrix
-from ._numerics import as_float, cast, check_shape, eps, matmul, public
+from ._numerics import as_float, cast, check_shape, eps, matmul, public, stack_matrix
 from ._quaternion import _prescaled
 from ._rotvec import _exp_coeffs
 
@@ -93,7 +93,7 @@ def _combo(alpha, beta, gamma, p):
         (beta * z + gamma * y * x, alpha + gamma * y * y, -beta * x + gamma * y * z),
         (-beta * y + gamma * z * x, beta * x + gamma * z * y, alpha + gamma * z * z),
     )
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+    return stack_matrix(rows)
 
 
 def _combo_apply(alpha, beta, gamma, p, u):

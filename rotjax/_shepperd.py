@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._numerics import sum_squares
+from ._numerics import sum_squares, unstack_matrix
 
 
 def entries(R):
     """The nine entries of a ``(..., 3, 3)`` matrix, row by row, as per-rotation arrays."""
-    return [R[..., k, j] for k in range(3) for j in range(3)]
+    return unstack_matrix(R)
 
 
 def k4_columns(r, one=1.0):
