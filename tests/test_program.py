@@ -162,3 +162,128 @@ def test_loops_are_vectorised(tmp_path):
     wrong = {k: (v, NOT_FULL_WIDTH.get(k, 0)) for k, v in narrow.items()}
     wrong = {k: v for k, v in wrong.items() if v[0] != v[1]}
     assert not wrong, f"loops without full-width vectors, (program): (found, expected): {wrong}"
+
+
+# --- composition: chains of rotjax operations are one pass --------------------------------
+#
+# A rotjax operation fed into another, or returned beside a second output, must not write its
+# result out and read it back (nor compute it again per component): the compiled program of a
+# chain reads its inputs and writes its outputs about once, forward and under jit(grad), like a
+# single conversion. Budgets: bytes only (loops and flops follow from the parts).
+
+
+def _t(q, t):
+    return rj.RigidTransform.from_components(t, rj.Rotation.from_quat(q))
+
+
+def _parts(T):
+    t, r = T.as_components()
+    return t, r.as_quat()
+
+
+_FROM = {
+    "quat": (rj.Rotation.from_quat, (4,)),
+    "matrix": (lambda m: rj.Rotation.from_matrix(m, assume_valid=True), (3, 3)),
+    "rotvec": (rj.Rotation.from_rotvec, (3,)),
+    "mrp": (rj.Rotation.from_mrp, (3,)),
+    "euler": (lambda a: rj.Rotation.from_euler(SEQ, a), (3,)),
+}
+_AS = {
+    "quat": lambda r: r.as_quat(),
+    "matrix": lambda r: r.as_matrix(),
+    "rotvec": lambda r: r.as_rotvec(),
+    "mrp": lambda r: r.as_mrp(),
+    "euler": lambda r: r.as_euler(SEQ),
+}
+COMPOSED = {
+    # the object API: every from_X(...).as_Y() pair, the operators and the pose methods
+    **{
+        f"Rotation.from_{a}().as_{b}()": (lambda x, f=f, g=g: g(f(x)), [s])
+        for a, (f, s) in _FROM.items()
+        for b, g in _AS.items()
+    },
+    "Rotation *": (lambda p, q: (rj.Rotation.from_quat(p) * rj.Rotation.from_quat(q)).as_quat(),
+                   [(4,), (4,)]),
+    "Rotation.inv": (lambda q: rj.Rotation.from_quat(q).inv().as_quat(), [(4,)]),
+    "Rotation.apply": (lambda q, v: rj.Rotation.from_quat(q).apply(v), [(4,), (3,)]),
+    "Rotation.magnitude": (lambda q: rj.Rotation.from_quat(q).magnitude(), [(4,)]),
+    "RigidTransform *": (lambda q1, t1, q2, t2: _parts(_t(q1, t1) * _t(q2, t2)),
+                         [(4,), (3,), (4,), (3,)]),
+    "RigidTransform.apply": (lambda q, t, v: _t(q, t).apply(v), [(4,), (3,), (3,)]),
+    "RigidTransform.inv": (lambda q, t: _parts(_t(q, t).inv()), [(4,), (3,)]),
+    "RigidTransform.from_exp_coords": (
+        lambda xi: _parts(rj.RigidTransform.from_exp_coords(xi)), [(6,)]),
+    "RigidTransform.as_exp_coords": (lambda q, t: _t(q, t).as_exp_coords(), [(4,), (3,)]),
+    # the pipelines users write, through the functions and through the objects
+    "unit quaternion from rotvec": (
+        lambda v: rj.quaternion_normalize(rj.rotvec_to_quaternion(v)), [(3,)]),
+    "Euler angles from a matrix": (
+        lambda m: rj.Rotation.from_matrix(m, assume_valid=True).as_euler(SEQ), [(3, 3)]),
+    "gyro step q * exp(w)": (
+        lambda q, w: (rj.Rotation.from_quat(q) * rj.Rotation.from_rotvec(w)).as_quat(),
+        [(4,), (3,)]),
+    "gyro step, functions": (
+        lambda q, w: rj.quaternion_normalize(
+            rj.quaternion_multiply(q, rj.rotvec_to_quaternion(w))), [(4,), (3,)]),
+    "compose then apply": (
+        lambda p, q, v: (rj.Rotation.from_quat(p) * rj.Rotation.from_quat(q)).apply(v),
+        [(4,), (4,), (3,)]),
+    "relative angle |log(p^-1 q)|": (
+        lambda p, q: (rj.Rotation.from_quat(p).inv() * rj.Rotation.from_quat(q)).magnitude(),
+        [(4,), (4,)]),
+    "Euler angles then apply": (
+        lambda a, v: rj.Rotation.from_euler(SEQ, a).apply(v), [(3,), (3,)]),
+    "pose compose then apply": (
+        lambda q1, t1, q2, t2, v: (_t(q1, t1) * _t(q2, t2)).apply(v),
+        [(4,), (3,), (4,), (3,), (3,)]),
+    # a conversion returned beside a second output
+    "(matrix_to_quaternion(R), 2 t)": (lambda m, t: (rj.matrix_to_quaternion(m), 2 * t),
+                                       [(3, 3), (3,)]),
+    "(rotvec_to_quaternion(v), 2 t)": (lambda v, t: (rj.rotvec_to_quaternion(v), 2 * t),
+                                       [(3,), (3,)]),
+    "(quaternion_to_matrix(q), q)": (lambda q: (rj.quaternion_to_matrix(q), q), [(4,)]),
+    "matrix_to_rotvec": (rj.matrix_to_rotvec, [(3, 3)]),
+    "RigidTransform(m, normalize=False)": (
+        lambda m: _parts(rj.RigidTransform(m, normalize=False)), [(4, 4)]),
+    "se3_log": (rj.se3_log, [(4, 4)]),
+    "se3_exp": (rj.se3_exp, [(6,)]),
+}  # fmt: skip
+
+# The default tier checks these; the slow tier every case.
+_COMPOSED_FAST = {
+    "Rotation.from_rotvec().as_quat()",
+    "Rotation.from_matrix().as_euler()",
+    "gyro step q * exp(w)",
+    "pose compose then apply",
+    "(matrix_to_quaternion(R), 2 t)",
+}
+
+
+def _composed_params():
+    return [
+        pytest.param(n, marks=() if n in _COMPOSED_FAST else pytest.mark.slow) for n in COMPOSED
+    ]
+
+
+def _io_bytes(f, shapes, dtype, grad):
+    item = np.dtype(dtype).itemsize
+    ins = sum(int(np.prod(s)) for s in shapes) * item
+    if grad:  # reads every argument, writes the cotangent of the first
+        return ins + int(np.prod(shapes[0])) * item
+    out = jax.eval_shape(f, *(jax.ShapeDtypeStruct((N, *s), dtype) for s in shapes))
+    return ins + sum(o.size * o.dtype.itemsize for o in jax.tree.leaves(out)) / N
+
+
+@pytest.mark.parametrize("mode", ["forward", "gradient"])
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+@pytest.mark.parametrize("name", _composed_params())
+def test_composed_program_is_one_pass(name, dtype, mode):
+    f, shapes = COMPOSED[name]
+    grad = mode == "gradient"
+    g = jax.grad(lambda *a: sum(jnp.sum(x) for x in jax.tree.leaves(f(*a)))) if grad else f
+    _, nbytes, _ = _program(g, shapes, dtype)
+    io = _io_bytes(f, shapes, dtype, grad)
+    assert nbytes <= BYTES_SLACK * io, (
+        f"{mode} of {name} {np.dtype(dtype).name}: {nbytes:.1f} bytes per rotation accessed, at "
+        f"most {BYTES_SLACK} x {io:.0f} (inputs and outputs) expected"
+    )
