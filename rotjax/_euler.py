@@ -26,6 +26,7 @@ from ._numerics import (
 )
 from ._quaternion import _multiply, _to_matrix
 from ._rotvec import _sin_cos
+from ._shepperd import entries
 
 _VALID = (
     "three axis letters with no two consecutive equal, all uppercase for intrinsic "
@@ -406,7 +407,7 @@ def _quat_to_euler_parts_jvp(seq, primals, tangents):
 
 def _matrix_to_euler(R, seq):
     """quaternion_to_euler of the Shepperd column of ``R``."""
-    return stack(_matrix_to_euler_parts(R, seq), branches=True)
+    return stack(_matrix_to_euler_parts(tuple(entries(R)), seq), branches=True)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))

@@ -12,7 +12,6 @@ from ._numerics import (
     as_float,
     cast,
     check_shape,
-    components,
     exponent_scale,
     from_scalar_last,
     max_abs,
@@ -37,11 +36,12 @@ def _prescaled(R, split=False):
     ``split``: read the entries with one ``jnp.split`` instead of nine slices, for code that JAX
     differentiates itself (``"markley"``): the transpose of nine slices is nine pads of the
     whole cotangent, which XLA:CPU evaluated at every entry (seconds per call at 2^14)."""
-    r = (
-        entries(R)
-        if not split
-        else [x[..., 0] for x in jnp.split(R.reshape(*R.shape[:-2], 9), 9, -1)]
-    )
+    if isinstance(R, (list, tuple)):  # the entries already
+        r = list(R)
+    elif split:
+        r = [x[..., 0] for x in jnp.split(R.reshape(*R.shape[:-2], 9), 9, -1)]
+    else:
+        r = entries(R)
     # Always the power of two, also for a rotation matrix (s = 1 or 2 there): every step below
     # is exact under it, and one less select keeps XLA:CPU's per-rotation scale function small
     # enough to be inlined into the vectorised loop in float64 too.
@@ -82,7 +82,7 @@ def _hemisphere_scale(v, sq):
 
 def _shepperd(R):
     """The quaternion of :func:`_shepperd_parts`, stacked."""
-    return stack(_shepperd_parts(R))
+    return stack(_shepperd_parts(tuple(entries(R))))
 
 
 @jax.custom_jvp
@@ -110,14 +110,11 @@ def _column_tangent(R, dR):
     power of two), ``t = h rsqrt(h)`` with ``h = |r|^2 / 3``, so ``dt = tau dh``,
     ``tau = y (1 - h y^2 / 2)``, ``y = rsqrt(h)`` (rsqrt's rule); ``K`` is affine in ``R``
     and the masks are constant, so ``dc`` is the selected column of ``K``'s own formula on
-    ``s dR``, with ``dt`` for ``t``. The entries of ``dR`` are read by
-    :func:`rotjax._numerics.components`: in reverse mode the cotangent of ``R`` is then
-    written by one loop from per-rotation expressions (slices of ``dR`` would transpose to
-    nine pads, each evaluated for every entry)."""
+    ``s dR``, with ``dt`` for ``t``. ``R`` and ``dR``: the nine entries, row by row."""
     cols, diag, (h, y, s) = _homogeneous_k(R)
     m = masks(diag)
-    d = components(dR.reshape(*dR.shape[:-2], 9))
-    r_dr = sum((x * s) * e for x, e in zip(entries(R), d, strict=True))  # r . dR, r = s R
+    d = list(dR)
+    r_dr = sum((x * s) * e for x, e in zip(R, d, strict=True))  # r . dR, r = s R
     dt = (2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y) * r_dr
     dcols, _ = k4_columns(d, dt)
     return column(m, cols), [s * x for x in column(m, dcols)]

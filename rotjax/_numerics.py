@@ -286,22 +286,22 @@ def _select_stack_jvp(primals, tangents):
 
 
 def stack_matrix(rows):
-    """``(..., 3, 3)`` from three rows of three per-rotation arrays, written as :func:`stack`
-    writes (its nine entries, row by row); :func:`unstack_matrix` reads them back."""
+    """``(..., m, n)`` from ``m`` rows of ``n`` per-rotation arrays, written as :func:`stack`
+    writes (its entries, row by row); :func:`unstack_matrix` reads them back."""
     entries = [x for row in rows for x in row]
     flat = stack(entries)
-    out = flat.reshape(*flat.shape[:-1], 3, 3)
+    out = flat.reshape(*flat.shape[:-1], len(rows), len(rows[0]))
     _note(out, entries)
     return out
 
 
 def unstack_matrix(R):
-    """The nine entries of a ``(..., 3, 3)`` matrix, row by row, as per-rotation arrays (see
+    """The entries of a ``(..., m, n)`` matrix, row by row, as per-rotation arrays (see
     :func:`unstack`)."""
     hit = _PARTS.get(id(R))
     if hit is not None and hit[0]() is R:
         return list(hit[1])
-    return list(_read(R.reshape(*R.shape[:-2], 9)))
+    return list(_read(R.reshape(*R.shape[:-2], R.shape[-2] * R.shape[-1])))
 
 
 def stack_scaled(parts, scale):

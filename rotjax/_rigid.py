@@ -30,8 +30,7 @@ from ._numerics import (
 )
 from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix, _turn
 from ._rotation import Rotation, _concrete, _float, _identity_quat, _input, _Sequence
-from ._rotvec import _quat_to_rotvec
-from ._se3 import _combo_apply, _inv_coeffs, _so3_coeffs
+from ._se3 import exp_parts, homogeneous, log_parts
 
 # --- SE(3) exponential coordinates ------------------------------------------------------
 #
@@ -46,16 +45,13 @@ def _rotate(q, v):
 
 
 def _exp(xi):
-    phi, v = xi[..., :3], xi[..., 3:]
-    _, k, c, a, b = _so3_coeffs(phi)
-    q = jnp.concatenate([k[..., None] * phi, c[..., None]], axis=-1)  # rotvec_to_quaternion
-    return q, _combo_apply(2 * k * c, a, b, phi, v)
+    xi = unstack(xi)
+    q, t = exp_parts(xi[:3], xi[3:])
+    return stack(q), stack(t)
 
 
 def _log(q, t):
-    phi = _quat_to_rotvec(q)
-    g, e = _inv_coeffs(phi)
-    return jnp.concatenate([phi, _combo_apply(g, jnp.full_like(g, -0.5), e, phi, t)], axis=-1)
+    return stack(log_parts(unstack(q), unstack(t)))
 
 
 # --- jitted kernels ----------------------------------------------------------------------
@@ -91,10 +87,8 @@ def _from_matrix(m, normalize):
 @jit
 def _as_matrix(q, t):
     # NaN in the quaternion reaches the last row too (0 |w| is +0 or NaN), as in scipy.
-    zero = 0 * jnp.abs(q[..., 3])
-    top = jnp.concatenate([_to_matrix(q), t[..., None]], axis=-1)
-    bottom = jnp.stack([zero, zero, zero, zero + 1], axis=-1)
-    return jnp.concatenate([top, bottom[..., None, :]], axis=-2)
+    q = unstack(q)
+    return homogeneous(q, unstack(t), 0 * jnp.abs(q[3]))
 
 
 @jit

@@ -20,10 +20,22 @@ from jax import Array
 from jax.typing import ArrayLike
 
 from . import _numerics as nm
-from ._matrix import _from_matrix
-from ._numerics import as_float, cast, check_shape, eps, matmul, public, stack_matrix
-from ._quaternion import _prescaled
-from ._rotvec import _exp_coeffs
+from ._matrix import _shepperd_parts
+from ._numerics import (
+    as_float,
+    cast,
+    check_shape,
+    eps,
+    matmul,
+    public,
+    stack,
+    stack_matrix,
+    sum_squares,
+    unstack,
+    unstack_matrix,
+)
+from ._quaternion import _scaled_vector_parts, _to_matrix_parts
+from ._rotvec import _exp_coeffs, _rotvec_scale
 
 # --- power series in x = t^2 ------------------------------------------------------------------
 
@@ -76,9 +88,17 @@ def _series(x, series, closed):
     return jnp.where(small, out, closed(jnp.where(small, _CUT, x)))
 
 
+def _recip(x):
+    """``1 / x`` for ``x >= 1`` (the closed forms' ``t^2``): :func:`rotjax._numerics.rsqrt`
+    squared, multiplications and additions only, so that a result built on it stays one loop
+    (XLA writes a division read by several components in a loop of its own)."""
+    r = nm.rsqrt(x)
+    return r * r
+
+
 def _b_coeff(x, k, c):
     """``(t - sin t) / t^3`` for ``x = t^2``, given ``k = sin(t/2)/t`` and ``c = cos(t/2)``."""
-    return _series(x, _SERIES_B, lambda xb: (1 - 2 * k * c) / xb)
+    return _series(x, _SERIES_B, lambda xb: (1 - 2 * k * c) * _recip(xb))
 
 
 # --- building blocks ----------------------------------------------------------------------
@@ -87,7 +107,7 @@ def _b_coeff(x, k, c):
 def _combo(alpha, beta, gamma, p):
     """``alpha I + beta hat(p) + gamma p p^T``, shape ``(..., 3, 3)``, elementwise (every SO(3)
     Jacobian has this form, since ``hat(p)^2 = p p^T - |p|^2 I``)."""
-    x, y, z = (p[..., i] for i in range(3))
+    x, y, z = unstack(p)
     rows = (
         (alpha + gamma * x * x, -beta * z + gamma * x * y, beta * y + gamma * x * z),
         (beta * z + gamma * y * x, alpha + gamma * y * y, -beta * x + gamma * y * z),
@@ -97,30 +117,58 @@ def _combo(alpha, beta, gamma, p):
 
 
 def _combo_apply(alpha, beta, gamma, p, u):
-    """``(alpha I + beta hat(p) + gamma p p^T) @ u`` without forming the matrix."""
-    pu = jnp.sum(p * u, axis=-1)
-    return alpha[..., None] * u + beta[..., None] * nm.cross(p, u) + (gamma * pu)[..., None] * p
+    """``(alpha I + beta hat(p) + gamma p p^T) @ u`` without forming the matrix, on the
+    components of ``p`` and ``u`` (lists of three per-rotation arrays)."""
+    (p0, p1, p2), (u0, u1, u2) = p, u
+    gpu = gamma * (p0 * u0 + p1 * u1 + p2 * u2)
+    cross = (p1 * u2 - p2 * u1, p2 * u0 - p0 * u2, p0 * u1 - p1 * u0)
+    return [alpha * a + beta * b + gpu * c for a, b, c in zip(u, cross, p, strict=True)]
 
 
 def _so3_coeffs(p):
-    """``(x, k, c, a, b)`` of a rotation vector: ``x = t^2``, ``k = sin(t/2)/t``,
-    ``c = cos(t/2)``, ``a = (1 - cos t)/t^2``, ``b = (t - sin t)/t^3``."""
-    x = jnp.sum(p * p, axis=-1)
+    """``(x, k, c, a, b)`` of a rotation vector (its three components): ``x = t^2``,
+    ``k = sin(t/2)/t``, ``c = cos(t/2)``, ``a = (1 - cos t)/t^2``, ``b = (t - sin t)/t^3``."""
+    x = sum_squares(p)
     k, c = _exp_coeffs(x)
     return x, k, c, 2 * k * k, _b_coeff(x, k, c)
 
 
 def _inv_coeffs(p):
-    """``(g, e)`` of the inverse Jacobians: ``g = (t/2) cot(t/2)`` and ``e = (1 - g) / t^2``."""
-    x = jnp.sum(p * p, axis=-1)
+    """``(g, e)`` of the inverse Jacobians of a rotation vector (its three components):
+    ``g = (t/2) cot(t/2)`` and ``e = (1 - g) / t^2``."""
+    x = sum_squares(p)
     k, c = _exp_coeffs(x)
-    g = c / (2 * k)
-    return g, _series(x, _SERIES_E, lambda xb: (1 - g) / xb)
+    g = c * (0.5 * _recip_k(k))
+    return g, _series(x, _SERIES_E, lambda xb: (1 - g) * _recip(xb))
+
+
+def _recip_k(k):
+    """``1 / k`` for ``k = sin(t/2)/t`` (``1/pi <= k <= 1/2`` on ``[0, pi]``; 0 at ``t = 2 pi``,
+    where the inverse Jacobians are singular)."""
+    r = nm.rsqrt(k * k)
+    return r * r
+
+
+def exp_parts(p, r):
+    """``exp([p, r])`` on components: the unit quaternion ``(k p, c)`` of ``exp(p)`` (four
+    parts) and ``t = Jl(p) r`` (three). The one SE(3) exponential: :func:`se3_exp` and
+    ``RigidTransform.from_exp_coords``."""
+    _, k, c, a, b = _so3_coeffs(p)
+    return [k * x for x in p] + [c], _combo_apply(2 * k * c, a, b, p, r)
+
+
+def log_parts(q, t):
+    """``[p, Jl(p)^-1 t]`` with ``p = log(q)`` (angle in ``[0, pi]``) on components: ``q`` a
+    quaternion of any non-zero norm (four parts), ``t`` three. The one SE(3) logarithm:
+    :func:`se3_log` and ``RigidTransform.as_exp_coords``."""
+    p = list(_scaled_vector_parts(tuple(q), _rotvec_scale, False))
+    g, e = _inv_coeffs(p)
+    return p + _combo_apply(g, -0.5 * jnp.ones_like(g), e, p, t)
 
 
 def _left(p):
     """SO(3) left Jacobian of ``p`` as ``(alpha, beta, gamma)`` of :func:`_combo`."""
-    x, k, c, a, b = _so3_coeffs(p)
+    x, k, c, a, b = _so3_coeffs(unstack(p))
     return 2 * k * c, a, b  # alpha = 1 - b t^2 = sin(t)/t
 
 
@@ -131,7 +179,8 @@ def _blocks(tl, bl, br):
 
 
 def _split_xi(xi):
-    return xi[..., :3], xi[..., 3:]
+    parts = unstack(xi)
+    return stack(parts[:3]), stack(parts[3:])
 
 
 def _q_matrix(p, r):
@@ -313,7 +362,7 @@ def so3_left_jacobian_inverse(rotvec: ArrayLike) -> Array:
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
-    g, e = _inv_coeffs(p)
+    g, e = _inv_coeffs(unstack(p))
     return cast(_combo(g, jnp.full_like(g, -0.5), e, p), dt)
 
 
@@ -341,23 +390,17 @@ def so3_right_jacobian_inverse(rotvec: ArrayLike) -> Array:
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
-    g, e = _inv_coeffs(p)
+    g, e = _inv_coeffs(unstack(p))
     return cast(_combo(g, jnp.full_like(g, 0.5), e, p), dt)
 
 
-def _exp(xi):
-    """``(R, t)`` of ``exp([p, r])``: ``R = exp(p)``, ``t = Jl(p) r``."""
-    p, r = _split_xi(xi)
-    x, k, c, a, b = _so3_coeffs(p)
-    # R = cos t I + sin t / t P + (1 - cos t)/t^2 p p^T, cos t = c^2 - (k t)^2.
-    R = _combo(c * c - k * k * x, 2 * k * c, a, p)
-    return R, _combo_apply(2 * k * c, a, b, p, r)
-
-
-def _homogeneous(R, t):
-    top = jnp.concatenate([R, t[..., None]], axis=-1)
-    bottom = jnp.concatenate([jnp.zeros_like(t), jnp.ones_like(t[..., :1])], axis=-1)
-    return jnp.concatenate([top, bottom[..., None, :]], axis=-2)
+def homogeneous(q, t, zero=None):
+    """``[[R(q), t], [0, 1]]`` from the components of a unit quaternion ``q`` and of ``t``;
+    ``zero``: the bottom row's zeros (default exact zeros)."""
+    e = unstack_matrix(_to_matrix_parts(*q))
+    zero = jnp.zeros_like(t[0]) if zero is None else zero
+    rows = [e[3 * i : 3 * i + 3] + [t[i]] for i in range(3)] + [[zero, zero, zero, zero + 1]]
+    return stack_matrix(rows)
 
 
 @public
@@ -393,30 +436,8 @@ def se3_exp(xi: ArrayLike) -> Array:
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
-    return cast(_homogeneous(*_exp(xi)), dt)
-
-
-def _log(R, t):
-    """``[p, Jl(p)^-1 t]`` with ``p = log(R)``, angle in ``[0, pi]``."""
-    q = _prescaled(_from_matrix(R, "shepperd"))
-    q = jnp.where(q[..., 3:] < 0, -q, q)
-    qv, w = q[..., :3], q[..., 3]
-    n2 = jnp.sum(qv * qv, axis=-1)
-    w2 = w * w
-    # k = 2 atan2(n, w) / n (p = k qv), its Taylor series in (n/w)^2 near the identity, as in
-    # quaternion_to_rotvec.
-    small = n2 < eps(q.dtype) ** 0.5 * w2
-    n = jnp.sqrt(jnp.where(small, 1.0, n2))
-    u = n2 / jnp.where(small, w2, 1.0)
-    wsafe = jnp.where(small, w, 1.0)
-    k = jnp.where(small, (2 - 2 * u / 3 + 2 * u * u / 5) / wsafe, 2 * jnp.arctan2(n, w) / n)
-    k = jnp.where(n2 + w2 == 0, jnp.nan, k)
-    p = k[..., None] * qv
-    x = jnp.sum(p * p, axis=-1)
-    # (t/2) cot(t/2) = (t/2) w / n = k w / 2 (scale free: k scales as 1/|q|, w as |q|).
-    g = k * w / 2
-    e = _series(x, _SERIES_E, lambda xb: (1 - g) / xb)
-    return jnp.concatenate([p, _combo_apply(g, jnp.full_like(g, -0.5), e, p, t)], axis=-1)
+    xi = unstack(xi)
+    return cast(homogeneous(*exp_parts(xi[:3], xi[3:])), dt)
 
 
 @public
@@ -449,7 +470,9 @@ def se3_log(T: ArrayLike) -> Array:
     """
     (T,), dt = as_float(T)
     check_shape(T, (4, 4), "T")
-    return cast(_log(T[..., :3, :3], T[..., :3, 3]), dt)
+    e = unstack_matrix(T)  # T read once: R's nine entries and t's three
+    q = _shepperd_parts(tuple(e[4 * i + j] for i in range(3) for j in range(3)))
+    return cast(stack(log_parts(q, [e[3], e[7], e[11]])), dt)
 
 
 @public
@@ -547,7 +570,7 @@ def se3_right_jacobian(xi: ArrayLike) -> Array:
 
 
 def _left_inverse(p, r):
-    g, e = _inv_coeffs(p)
+    g, e = _inv_coeffs(unstack(p))
     Ji = _combo(g, jnp.full_like(g, -0.5), e, p)
     return _blocks(Ji, -matmul(matmul(Ji, _q_matrix(p, r)), Ji), Ji)
 
