@@ -29,7 +29,8 @@ import math
 import jax
 import jax.numpy as jnp
 
-from ._numerics import TIE_ULPS, eps, max_abs, rsqrt, safe_div, select, stack_scaled
+from ._elementary import rsqrt
+from ._numerics import TIE_ULPS, eps, max_abs, safe_div, select, stack_scaled
 from ._quaternion import _multiply, _to_matrix
 from ._shepperd import k4_columns, masks_once, select_column
 

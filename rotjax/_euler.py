@@ -10,6 +10,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
+from ._elementary import atan2, rsqrt, scaled_pair, sin_cos
 from ._matrix import _column_tangent, _selected_column
 from ._numerics import (
     as_float,
@@ -18,14 +19,12 @@ from ._numerics import (
     exponent_scale,
     from_scalar_last,
     public,
-    rsqrt,
     select,
     stack,
     to_scalar_last,
     unstack,
 )
 from ._quaternion import _multiply, _to_matrix
-from ._rotvec import _sin_cos
 from ._shepperd import entries
 
 _VALID = (
@@ -73,104 +72,11 @@ def _prep_angles(angles, degrees):
 
 def _elementary(axis: int, angle):
     """Scalar-last quaternion of a rotation by `angle` about coordinate axis `axis`."""
-    s, c = _sin_cos(angle / 2)  # multiplications and additions: fuses into its consumers
+    s, c = sin_cos(angle / 2)  # multiplications and additions: fuses into its consumers
     z = jnp.zeros_like(s)
     comps = [z, z, z, c]
     comps[axis] = s
     return stack(comps)
-
-
-# --- a polynomial atan2 ----------------------------------------------------------------------
-# XLA:CPU's atan2 dominated Euler extraction (three per rotation); this branch-free version
-# fuses into the surrounding loop (see the performance page). It is within about 2 ulp of the
-# correctly rounded value in both dtypes, which keeps the Euler backward error within its
-# bounds (tests/test_core_oracle.py).
-#
-# Reduction: t = min(|x|, |y|) / max(|x|, |y|) in [0, 1]; above tan(pi/8) it is mapped to
-# u = (t - 1) / (t + 1) (one division either way), so |u| <= tan(pi/8) and
-# atan2 = k pi/4 +- atan(u) for an octant k in 0..4, with k pi/4 split into hi + lo parts so the
-# reconstruction adds no more than the final rounding.
-# atan(u) = u + u s P(s), s = u^2: P is a Chebyshev fit (mpmath.chebyfit at 50 digits) of
-# (atan(u)/u - 1)/s on [0, tan^2(pi/8)], degree 5 for float32 and 11 for float64; max error
-# relative to atan(u): 9e-11 and 2e-19, far below half an eps.
-_ATAN_P = {
-    4: (
-        0.050481385120797445, -0.08624676145249494, 0.11071365021884794, -0.14284151193628614,
-        0.19999977258688387, -0.333333332792548,
-    ),
-    8: (
-        0.016285756855221028, -0.034570561981427744, 0.04551593220626549, -0.05230454270650244,
-        0.05878928997834775, -0.06666424885738255, 0.07692296375032143, -0.09090908753500877,
-        0.11111111105155447, -0.14285714285659828, 0.19999999999999804, -0.3333333333333333,
-    ),
-}  # fmt: skip
-_QUARTER_PI = {  # (hi, lo) of k pi/4, k = 0..4, rounded to float32 / float64
-    4: (
-        (0.0, 0.7853981852531433, 1.5707963705062866, 2.356194496154785, 3.1415927410125732),
-        (0.0, -2.1855694143368964e-08, -4.371138828673793e-08, -5.962440319251527e-09,
-         -8.742277657347586e-08),
-    ),
-    8: (
-        (0.0, 0.7853981633974483, 1.5707963267948966, 2.356194490192345, 3.141592653589793),
-        (0.0, 3.061616997868383e-17, 6.123233995736766e-17, 9.184850993605148e-17,
-         1.2246467991473532e-16),
-    ),
-}  # fmt: skip
-_TAN_PI_8 = 0.41421356237309503
-
-
-@jax.custom_jvp
-def _atan2(y, x):
-    """`atan2(y, x)` for float32/float64, branch-free; 0 (not NaN) at `x = y = 0`.
-
-    Signed zeros follow IEEE `atan2` except at the origin, which gives 0 like
-    `safe_atan2`.
-    """
-    size = jnp.dtype(x.dtype).itemsize
-    ax, ay = jnp.abs(x), jnp.abs(y)
-    swap = ay > ax
-    # where, not jnp.minimum/maximum: a NaN operand must reach the result.
-    mn, mx = jnp.where(swap, ax, ay), jnp.where(swap, ay, ax)
-    big = mn > _TAN_PI_8 * mx
-    num = jnp.where(big, mn - mx, mn)
-    den = jnp.where(big, mn + mx, mx)
-    # A reciprocal and a product rather than one division (one more rounding, +0.1 ulp on
-    # average): u is used several times below, and XLA:CPU materialises a division with several
-    # uses in a loop of its own, while the product fuses (one pass over memory fewer).
-    u = num * (1 / jnp.where(den == 0, 1, den))  # x = y = 0: u = 0
-    s = u * u
-    p = jnp.full_like(s, _ATAN_P[size][0])
-    for c in _ATAN_P[size][1:]:
-        p = p * s + c
-    r = u + u * (s * p)
-    xneg = jnp.signbit(x)
-    k = jnp.where(big, 1, 0)
-    k = jnp.where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
-    k = jnp.where(xneg, 4 - k, k)  # pi - (...) for x < 0
-    sign = select(swap != xneg, -1, 1, x.dtype)
-    hi, lo = _QUARTER_PI[size]
-
-    def octant(vals):
-        vals = [jnp.asarray(c, x.dtype) for c in vals]  # exact: rounded to this dtype
-        v = jnp.where(k == 1, vals[1], vals[0])
-        v = jnp.where(k == 2, vals[2], v)
-        v = jnp.where(k == 3, vals[3], v)
-        return jnp.where(k == 4, vals[4], v)
-
-    a = octant(hi) + (octant(lo) + sign * r)
-    a = jnp.where(jnp.signbit(y), -a, a)
-    return jnp.where((ax == 0) & (ay == 0), jnp.zeros_like(a), a)
-
-
-@_atan2.defjvp
-def _atan2_jvp(primals, tangents):
-    # The exact derivative, (x dy - y dx) / (x^2 + y^2); 0 at the origin, as safe_atan2.
-    # x and y are scaled by a power of two s first (exact), so that x^2 + y^2 cannot underflow:
-    # it is s (xs dy - ys dx) / (xs^2 + ys^2), about 1 / |(x, y)| at any scale.
-    (y, x), (dy, dx) = primals, tangents
-    xs, ys, s, _ = _scaled_pair(x, y)
-    r2 = xs * xs + ys * ys
-    return _atan2(y, x), (xs * dy - ys * dx) * (s / jnp.where(r2 == 0, 1, r2))
 
 
 def _euler_to_quat(a, seq):
@@ -178,14 +84,6 @@ def _euler_to_quat(a, seq):
     q0, q1, q2 = (_elementary(ax, a[..., n]) for n, ax in enumerate(axes))
     # intrinsic: R = R_0 R_1 R_2 (rotating axes); extrinsic: R = R_2 R_1 R_0 (fixed axes)
     return _multiply(_multiply(q0, q1), q2) if intrinsic else _multiply(_multiply(q2, q1), q0)
-
-
-def _scaled_pair(u, v):
-    """`(u s, v s, s, 1 / s)` for the power of two `s` (exact, no derivative) that brings the
-    larger of `|u|`, `|v|` into `[1, 2)`: their squares then neither underflow nor
-    overflow."""
-    s, inv = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
-    return u * s, v * s, s, inv
 
 
 def _lifted(u, v):
@@ -327,7 +225,7 @@ def _quat_to_euler_parts(q, seq):
     locked = locks[0] | locks[1]
     # The substitution makes the zeroed (last) angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: it is set exactly.
-    out = [_atan2(num[n], den[n]) * f + s for n, f, s in zip(order, factor, shift, strict=True)]
+    out = [atan2(num[n], den[n]) * f + s for n, f, s in zip(order, factor, shift, strict=True)]
     out[2] = jnp.where(locked, 0.0, out[2])
     return tuple(jnp.where(bad, jnp.nan, x) for x in out)
 
@@ -349,7 +247,7 @@ def _euler_jacobian(comps, seq):
     2 atan2(|C|, |A|), with derivative 2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) and
     d|C| = C.dC / |C|, taken as 0 where C = 0 (at lock the middle angle sits at the edge of its
     range, a kink: the minimum-norm subgradient, as _hypot's). Near lock one factor is tiny:
-    each is scaled by its own power of two before it is squared (`_scaled_pair`), so the
+    each is scaled by its own power of two before it is squared (`scaled_pair`), so the
     derivatives, about 1 / distance, stay right down to the lock threshold rather than
     dividing by an underflowed |C|^2.
 
@@ -358,10 +256,10 @@ def _euler_jacobian(comps, seq):
     once per rotation in the one loop that writes the cotangent.
     """
     scale, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*comps, seq)
-    ua, ub, ma, _ = _scaled_pair(sa, sb)  # substituted factors, for the outer angles
-    uc, ud, mc, _ = _scaled_pair(sc, sd)
-    va, vb, _, ka = _scaled_pair(a, b)  # the factors before the substitution, for the middle
-    vc, vd, _, kc = _scaled_pair(c, d)
+    ua, ub, ma, _ = scaled_pair(sa, sb)  # substituted factors, for the outer angles
+    uc, ud, mc, _ = scaled_pair(sc, sd)
+    va, vb, _, ka = scaled_pair(a, b)  # the factors before the substitution, for the middle
+    vc, vd, _, kc = scaled_pair(c, d)
 
     def inv_modulus(u, v):  # 1 / |(u, v)| for a scaled pair, 0 at the origin (double where)
         m2 = u * u + v * v

@@ -8,6 +8,7 @@ from jax import Array
 from jax.typing import ArrayLike
 
 from ._eigen import nearest_quaternion
+from ._elementary import rsqrt
 from ._numerics import (
     as_float,
     cast,
@@ -16,7 +17,6 @@ from ._numerics import (
     from_scalar_last,
     max_abs,
     public,
-    rsqrt,
     stack,
     stack_scaled,
     sum_squares,

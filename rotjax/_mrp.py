@@ -7,6 +7,7 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
+from ._elementary import rsqrt
 from ._numerics import (
     as_float,
     cast,
@@ -15,7 +16,6 @@ from ._numerics import (
     from_scalar_last,
     max_abs,
     public,
-    rsqrt,
     select,
     stack,
     sum_squares,

@@ -41,48 +41,6 @@ def matvec(a, x):
     return jnp.sum(a * x[..., None, :], axis=-1)
 
 
-# Newton's iteration for 1/sqrt(x): the integer type that reinterprets the float's bits, the
-# magic constant of the initial guess (relative error at most 3.4%), and the number of steps
-# (the error squares at each: 3.4e-2, 1.7e-3, 4.6e-6, 3.2e-11, 1.5e-21).
-_RSQRT_START = {
-    jnp.dtype(jnp.float32): (jnp.uint32, 0x5F375A86, 3),
-    jnp.dtype(jnp.float64): (jnp.uint64, 0x5FE6EB50C7B537A9, 4),
-}
-
-
-@jax.custom_jvp
-def rsqrt(x):
-    """`1 / sqrt(x)` for positive, normal, finite float32 or float64 `x`, from
-    multiplications and additions only.
-
-    XLA counts `rsqrt`, `sqrt` and division as expensive and will not recompute them inside
-    a consumer that reads each result more than once, so a per-rotation scale stacked into
-    `(..., 4)` costs a loop of its own, which reads the input again. This form fuses. Initial
-    guess from the bits of `x` (Lomont's constants), then Newton steps `y (3 - x y^2) / 2`,
-    the last one written as a correction `y + y (1/2 - x y^2 / 2)` so that its rounding
-    error is that of a small term: at most 0.63 eps in each dtype, as for `lax.rsqrt`
-    (checked against mpmath in the tests). Outside the domain (zero, subnormal, infinite) the
-    result is meaningless; NaN gives NaN.
-    """
-    int_type, magic, steps = _RSQRT_START[jnp.dtype(x.dtype)]
-    bits = jax.lax.bitcast_convert_type(x, int_type)
-    # Unsigned, so that the shift is a logical one: x86 has no vector arithmetic shift of
-    # 64-bit integers before AVX-512, and a signed one made the float64 loops scalar.
-    half = jax.lax.shift_right_logical(bits, jnp.asarray(1, int_type))
-    y = jax.lax.bitcast_convert_type(jnp.asarray(magic, int_type) - half, x.dtype)
-    h = 0.5 * x
-    for _ in range(steps - 1):
-        y = y * (1.5 - h * y * y)
-    return y + y * (0.5 - h * y * y)
-
-
-@rsqrt.defjvp
-def _rsqrt_jvp(primals, tangents):
-    (x,), (dx,) = primals, tangents
-    y = rsqrt(x)
-    return y, -0.5 * y * y * y * dx
-
-
 def eps(dtype) -> float:
     """Machine epsilon of `dtype` as a Python float."""
     return float(np.finfo(dtype).eps)

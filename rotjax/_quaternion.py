@@ -15,16 +15,15 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
+from ._elementary import atan2, rsqrt
 from ._numerics import (
     as_float,
     cast,
     check_shape,
+    exponent_scale,
     from_scalar_last,
     max_abs,
     public,
-    rsqrt,
-    safe_atan2,
-    scaled_norm_parts,
     stack,
     stack_matrix,
     stack_scaled,
@@ -167,11 +166,16 @@ def _angle(q):
     or a non-finite component)."""
     (x, y, z, w), _ = _prescaled_parts(q)  # |w|, n of order 1: atan2's derivative is finite
     w = jnp.abs(w)
-    n = scaled_norm_parts([x, y, z])  # 1e-160 stays 1e-160: atan2 is a ratio, scale-free
+    # |q_v| with q_v scaled on its own (a power of two), so that 1e-160 stays 1e-160 (atan2 is
+    # a ratio, scale-free); the root as m2 rsqrt(m2), 0 with a zero gradient at q_v = 0.
+    s, inv = exponent_scale(jax.lax.stop_gradient(max_abs(x, y, z)))
+    m2 = sum_squares([x * s, y * s, z * s])
+    zero = m2 == 0
+    n = jnp.where(zero, 0.0, m2 * rsqrt(jnp.where(zero, 1.0, m2))) * inv
     # NaN for the zero quaternion: atan2(0, 0) = 0 would pass for the identity; and for an
     # infinite component, where atan2 would return a finite angle.
     bad = ((n == 0) & (w == 0)) | ~jnp.isfinite(n + w)
-    return jnp.where(bad, jnp.nan, 2 * safe_atan2(n, w))
+    return jnp.where(bad, jnp.nan, 2 * atan2(n, w))
 
 
 @public

@@ -8,6 +8,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
+from ._elementary import atan_ratio, rsqrt, sin_cos
 from ._matrix import _from_matrix
 from ._numerics import (
     as_float,
@@ -20,7 +21,6 @@ from ._numerics import (
     like_rank,
     matmul,
     public,
-    rsqrt,
     safe_norm,
     select,
     stack,
@@ -35,73 +35,17 @@ def _small(x2):
     return x2 < eps(x2.dtype) ** 0.5
 
 
-# pi/2 in three parts (Cody & Waite): the first two have few enough bits that their products
-# with the quadrant count j are exact (j < 2^12 in float32, 2^27 in float64), the third is the
-# rounded rest.
-_PIO2 = {
-    4: (1.57080078125, -4.453584551811218e-06, -8.705515752716053e-10),
-    8: (1.5707963407039642, -1.3909067675399456e-08, 6.123233995736766e-17),
-}
-# sin(r) = r + r s P(s) and cos(r) = 1 - s/2 + s^2 Q(s), s = r^2 <= (pi/4)^2: Chebyshev fits
-# (mpmath.chebyfit, 50 digits) of (sin(r)/r - 1)/s and (cos(r) - 1 + s/2)/s^2, highest power
-# first; the error of sin and cos is below 0.1 eps (float32: 1.2e-8, 7.6e-10; float64: 1.3e-17,
-# 4.9e-19).
-_SIN_P = {
-    4: (-0.00019587890880412386, 0.008332748270629749, -0.1666666466231438),
-    8: (
-        1.5918129294866608e-10, -2.5051131845003624e-08, 2.755731610255244e-06,
-        -0.00019841269836758574, 0.008333333333330948, -0.16666666666666666,
-    ),
-}  # fmt: skip
-_COS_Q = {
-    4: (2.4547942085071572e-05, -0.0013888303035894866, 0.04166666465950221),
-    8: (
-        -1.1382632425521717e-11, 2.08761462684032e-09, -2.7557317271729793e-07,
-        2.480158729876569e-05, -0.0013888888888887398, 0.041666666666666664,
-    ),
-}  # fmt: skip
-
-
-def _horner(coeffs, s):
-    p = jnp.full_like(s, coeffs[0])
-    for c in coeffs[1:]:
-        p = p * s + c
-    return p
-
-
-def _sin_cos(a):
-    """`(sin a, cos a)` from multiplications, additions and selects: `a` reduced by the
-    nearest multiple `j pi/2` (exact for `|a|` below 6e3 in float32 and 2e8 in float64), the
-    polynomials above on the rest, and the quadrant `j mod 4` chosen by `jnp.where`. XLA fuses
-    this into the loop of its consumers (it keeps `jnp.sin` and `jnp.cos`, expensive, in
-    loops of their own when their result is read more than once)."""
-    size = jnp.dtype(a.dtype).itemsize
-    j = jnp.round(a * (2 / np.pi))
-    p1, p2, p3 = _PIO2[size]
-    r = ((a - j * p1) - j * p2) - j * p3
-    s = r * r
-    sin_r = r + r * (s * _horner(_SIN_P[size], s))
-    cos_r = (1 - 0.5 * s) + (s * s) * _horner(_COS_Q[size], s)
-    quadrant = j - 4 * jnp.floor(0.25 * j)  # 0, 1, 2, 3 (exact)
-    odd = (quadrant == 1) | (quadrant == 3)
-    sin_a = jnp.where(odd, cos_r, sin_r)
-    cos_a = jnp.where(odd, sin_r, cos_r)
-    sin_a = jnp.where(quadrant >= 2, -sin_a, sin_a)
-    cos_a = jnp.where((quadrant == 1) | (quadrant == 2), -cos_a, cos_a)
-    return sin_a, cos_a
-
-
 def _exp_coeffs(theta2):
     """`sin(t/2)/t` and `cos(t/2)` for `t = sqrt(theta2)`, smooth at 0 (double where).
 
-    Multiplications, additions and selects only (`rsqrt`, `_sin_cos`), so that a conversion
+    Multiplications, additions and selects only (`rsqrt`, `sin_cos`), so that a conversion
     built on them is one fused loop."""
     small = _small(theta2)
     safe = jnp.where(small, 1.0, theta2)  # any non-zero value keeps the gradient finite
     inv_t = rsqrt(safe)
     t = safe * inv_t
     t = t + (0.5 * inv_t) * (safe - t * t)  # one Newton step for sqrt: t to about 0.5 ulp
-    sin_h, cos_h = _sin_cos(0.5 * t)
+    sin_h, cos_h = sin_cos(0.5 * t)
     k = jnp.where(small, 0.5 - theta2 / 48 + theta2 * theta2 / 3840, sin_h * inv_t)
     c = jnp.where(small, 1 - theta2 / 8 + theta2 * theta2 / 384, cos_h)
     return k, c
@@ -135,42 +79,6 @@ def _rotvec_to_quat_parts_jvp(primals, tangents):
     return (k * x, k * y, k * z, c), out
 
 
-# f(u) = atan(sqrt(u)) / sqrt(u) on [0, 1]: Chebyshev fits (mpmath.chebyfit at 40 digits) of
-# degree 9 for float32 and 20 for float64, highest power first; max error 2.8e-9 and 5.4e-18.
-_ATAN_RATIO = {
-    4: (
-        -0.0017011700640685973, 0.010487649254949306, -0.030351864785781172, 0.05708955593030619,
-        -0.08349724968301601, 0.10932341501303093, -0.14260016082820906, 0.19998075281148714,
-        -0.3333327629198255, 0.9999999971605454,
-    ),
-    8: (
-        1.2631178430477426e-05, -0.00014617088163625013, 0.0008033604181626027,
-        -0.0028047655531701315, 0.007038646202989813, -0.013674139288399478,
-        0.021740213830758134, -0.02970071773623423, 0.03651081352721035, -0.042125723963855326,
-        0.04719723992321112, -0.052527255573225747, 0.05880342002401543, -0.06666371187721098,
-        0.0769227555520563, -0.09090906605656898, 0.11111110982087126, -0.14285714281592693,
-        0.19999999999929946, -0.3333333333333286, 1.0,
-    ),
-}  # fmt: skip
-
-
-@jax.custom_jvp
-def _atan_ratio(u):
-    """`atan(t) / t` for `u = t^2` in `[0, 1]`: the polynomial `_ATAN_RATIO`. Its derivative is
-    that of the same polynomial, evaluated as one (a second Horner loop on the derivative's
-    coefficients rather than JAX's transpose of the first, which is longer code)."""
-    return _horner(_ATAN_RATIO[jnp.dtype(u.dtype).itemsize], u)
-
-
-@_atan_ratio.defjvp
-def _atan_ratio_jvp(primals, tangents):
-    (u,), (du,) = primals, tangents
-    coeffs = _ATAN_RATIO[jnp.dtype(u.dtype).itemsize]
-    top = len(coeffs) - 1
-    slope = _horner([c * (top - i) for i, c in enumerate(coeffs[:-1])], u)
-    return _atan_ratio(u), slope * du
-
-
 def _rotvec_scale(n2, w):
     """`k = 2 atan2(n, |w|) / n` (sign of `w` included, so that the angle is in [0, pi]) from
     `n^2 = |q_v|^2` and `w` of a prescaled quaternion: the rotation vector is `k q_v`.
@@ -187,7 +95,7 @@ def _rotvec_scale(n2, w):
     near = n2 <= w2
     inv_m = rsqrt(jnp.where(near, w2, n2))
     u = jnp.where(near, n2, w2) * (inv_m * inv_m)
-    f = _atan_ratio(u)
+    f = atan_ratio(u)
     half = jnp.where(near, f, 0.5 * np.pi - aw * inv_m * f)  # atan2(n, |w|) * m / m
     return (2 * sign) * inv_m * half
 

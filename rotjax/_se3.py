@@ -20,6 +20,7 @@ from jax import Array
 from jax.typing import ArrayLike
 
 from . import _numerics as nm
+from ._elementary import rsqrt
 from ._matrix import _shepperd_parts
 from ._numerics import (
     as_float,
@@ -89,10 +90,10 @@ def _series(x, series, closed):
 
 
 def _recip(x):
-    """``1 / x`` for ``x >= 1`` (the closed forms' ``t^2``): :func:`rotjax._numerics.rsqrt`
+    """``1 / x`` for ``x >= 1`` (the closed forms' ``t^2``): :func:`rotjax._elementary.rsqrt`
     squared, multiplications and additions only, so that a result built on it stays one loop
     (XLA writes a division read by several components in a loop of its own)."""
-    r = nm.rsqrt(x)
+    r = rsqrt(x)
     return r * r
 
 
@@ -145,7 +146,7 @@ def _inv_coeffs(p):
 def _recip_k(k):
     """``1 / k`` for ``k = sin(t/2)/t`` (``1/pi <= k <= 1/2`` on ``[0, pi]``; 0 at ``t = 2 pi``,
     where the inverse Jacobians are singular)."""
-    r = nm.rsqrt(k * k)
+    r = rsqrt(k * k)
     return r * r
 
 

@@ -503,9 +503,10 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
     code, and the rule of the rotvec's polynomial that of JAX on the polynomial: quaternions
     of norms 1e-20 to 1e20, identity and near it, 180 degrees, both signs of w, and n = |w|
     (the switch between the two atan forms)."""
+    from rotjax._elementary import atan_ratio as _atan_ratio
     from rotjax._mrp import _mrp_scale
     from rotjax._quaternion import _scaled_vector_part
-    from rotjax._rotvec import _atan_ratio, _rotvec_scale
+    from rotjax._rotvec import _rotvec_scale
 
     k_of, with_w = {"rotvec": (_rotvec_scale, False), "mrp": (_mrp_scale, True)}[which]
 

@@ -9,8 +9,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from rotjax._elementary import rsqrt
 from rotjax._matrix import _selected_column
-from rotjax._numerics import exponent_scale, rsqrt
+from rotjax._numerics import exponent_scale
 
 # Exponent ranges of normal numbers, and the documented accuracy of rsqrt.
 RANGE = {np.float32: (-37.5, 38.0), np.float64: (-307.5, 308.0)}
