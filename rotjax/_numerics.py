@@ -284,25 +284,6 @@ def max_abs(*xs):
     return pairwise(jnp.maximum, (jnp.abs(x) for x in xs))
 
 
-def scaled_norm(x):
-    """Euclidean norm over the last axis at any finite scale, with the gradient of
-    `safe_norm` (zero at the origin, the true derivative elsewhere).
-
-    The vector is scaled by a power of two so that its largest component is in `[1, 2)`
-    before squaring, and the norm scaled back: no overflow or underflow of the squares (the
-    norm of `(1e-160, 0, 0)` is `1e-160`, not 0).
-    """
-    return scaled_norm_parts(unstack(x))
-
-
-def scaled_norm_parts(xs):
-    """:func:`scaled_norm` of the vector with components ``xs`` (per-rotation arrays)."""
-    s, inv = exponent_scale(jax.lax.stop_gradient(max_abs(*xs)))
-    sq = sum_squares([x * s for x in xs])
-    zero = sq == 0
-    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq))) * inv  # double where
-
-
 def safe_norm(x, axis=-1):
     """Euclidean norm with a finite gradient (zero) at the origin.
 

@@ -249,6 +249,20 @@ COMPOSED = {
     "se3_exp": (rj.se3_exp, [(6,)]),
 }  # fmt: skip
 
+# Cases above the common slack, with the reason. XLA:CPU materialises the inputs' components
+# (a slice each) before a fused loop it judges too large to take them in: the Euler programs
+# below are the single functions' (quaternion_to_euler's gradient, euler_to_matrix), whose
+# budgets above admit the same. And it writes each output of a program in a loop of its own
+# (no multi-output fusion), each reading the inputs it needs: the translation and the rotation
+# of a transform read the same matrix or quaternion.
+COMPOSED_SLACK = {
+    ("Rotation.from_quat().as_euler()", "gradient"): 2.3,
+    ("Rotation.from_euler().as_matrix()", "forward"): 1.55,
+    ("RigidTransform.inv", "forward"): 1.35,
+    ("RigidTransform(m, normalize=False)", "forward"): 1.7,
+    ("RigidTransform(m, normalize=False)", "gradient"): 1.7,
+}
+
 # The default tier checks these; the slow tier every case.
 _COMPOSED_FAST = {
     "Rotation.from_rotvec().as_quat()",
@@ -283,7 +297,8 @@ def test_composed_program_is_one_pass(name, dtype, mode):
     g = jax.grad(lambda *a: sum(jnp.sum(x) for x in jax.tree.leaves(f(*a)))) if grad else f
     _, nbytes, _ = _program(g, shapes, dtype)
     io = _io_bytes(f, shapes, dtype, grad)
-    assert nbytes <= BYTES_SLACK * io, (
+    slack = COMPOSED_SLACK.get((name, mode), BYTES_SLACK)
+    assert nbytes <= slack * io, (
         f"{mode} of {name} {np.dtype(dtype).name}: {nbytes:.1f} bytes per rotation accessed, at "
-        f"most {BYTES_SLACK} x {io:.0f} (inputs and outputs) expected"
+        f"most {slack} x {io:.0f} (inputs and outputs) expected"
     )
