@@ -781,6 +781,16 @@ class Rotation(_Sequence):
             raise ValueError(
                 "Cannot return sensitivity matrix with an infinite weight or one vector pair"
             )
+        # The primary pair (one pair, or the one with an infinite weight) is aligned exactly:
+        # a zero vector there is an error, as in scipy, on host input (NaN for JAX arrays).
+        host_w = None if weights is None else _concrete(weights)
+        primary = 0 if n == 1 else None
+        if host_w is not None and n > 1 and np.sum(np.isinf(host_w)) == 1:
+            primary = int(np.argmax(np.isinf(host_w)))
+        for x in (a, b) if primary is not None else ():
+            host = _concrete(x)
+            if host is not None and not np.any(np.atleast_2d(host)[primary]):
+                raise ValueError("Cannot align zero length primary vectors")
         q, rssd = _align(a2, b2, w)
         rot = Rotation._raw(q)
         if return_sensitivity:
