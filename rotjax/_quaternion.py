@@ -148,7 +148,7 @@ def _to_matrix(q):
 def _to_matrix_parts(x, y, z, w):
     """Rotation matrix of a quaternion given by its components (per-rotation arrays), of
     non-zero norm, squared norm a normal number: the homogeneous form, quadratic in ``q``, then
-    one division by ``|q|^2`` (Markley and Crassidis 2014, sec. 2.9.3, for any norm). An entry
+    one division by ``|q|^2`` (Markley & Crassidis 2014, Ch. 2, for any norm). An entry
     whose terms cancel is exactly zero (``z = w``: ``w^2 - z^2``), not ``1 - 2 z^2 / |q|^2``
     rounded; an entry equal to ``+-|q|^2`` is exactly ``+-1`` where ``|q|^2`` times its rounded
     reciprocal rounds to 1, as for every power-of-two norm (the prescaled unit quaternions)."""
