@@ -745,13 +745,18 @@ class Rotation(_Sequence):
         dt = jnp.result_type(a_in.dtype, b_in.dtype)
         a2, b2 = jnp.atleast_2d(a_in.astype(dt)), jnp.atleast_2d(b_in.astype(dt))
         for x, x0, name in ((a2, a_in, "a"), (b2, b_in, "b")):
-            if x.shape[-1] != 3 or x.ndim > 2:
+            if x.shape[-1] != 3:
                 raise ValueError(
                     f"Expected input `{name}` to have shape (3,) or (N, 3), got {x0.shape}"
                 )
         if a2.shape != b2.shape:
             raise ValueError(
                 "Expected inputs `a` and `b` to have same shapes, got "
+                f"{a_in.shape} and {b_in.shape} respectively."
+            )
+        if a2.ndim > 2:  # no broadcasting, as scipy
+            raise ValueError(
+                "Expected inputs `a` and `b` to have shape (3,) or (N, 3), got "
                 f"{a_in.shape} and {b_in.shape} respectively."
             )
         n = a2.shape[0]

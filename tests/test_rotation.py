@@ -277,6 +277,11 @@ def test_zero_primary_vector_message_and_nan_for_jax_arrays():
     assert np.all(np.isnan(r.as_quat())) and np.isnan(rssd)
 
 
+def test_align_vectors_batched_input_names_both_shapes():
+    with pytest.raises(ValueError, match="Expected inputs `a` and `b` to have shape"):
+        Rotation.align_vectors(V[None], V[None])
+
+
 def test_values_under_jit_give_nan():
     nan_q = jax.jit(lambda q: Rotation.from_quat(q).as_quat())(jnp.zeros((2, 4)).at[0, 3].set(1))
     assert np.all(np.isfinite(nan_q[0])) and np.all(np.isnan(nan_q[1]))
