@@ -744,13 +744,18 @@ class Rotation(_Sequence):
         dt = jnp.result_type(a_in.dtype, b_in.dtype)
         a2, b2 = jnp.atleast_2d(a_in.astype(dt)), jnp.atleast_2d(b_in.astype(dt))
         for x, x0, name in ((a2, a_in, "a"), (b2, b_in, "b")):
-            if x.shape[-1] != 3 or x.ndim > 2:
+            if x.shape[-1] != 3:
                 raise ValueError(
                     f"Expected input `{name}` to have shape (3,) or (N, 3), got {x0.shape}"
                 )
         if a2.shape != b2.shape:
             raise ValueError(
                 "Expected inputs `a` and `b` to have same shapes, got "
+                f"{a_in.shape} and {b_in.shape} respectively."
+            )
+        if a2.ndim > 2:  # no broadcasting, as scipy
+            raise ValueError(
+                "Expected inputs `a` and `b` to have shape (3,) or (N, 3), got "
                 f"{a_in.shape} and {b_in.shape} respectively."
             )
         n = a2.shape[0]
@@ -780,6 +785,16 @@ class Rotation(_Sequence):
             raise ValueError(
                 "Cannot return sensitivity matrix with an infinite weight or one vector pair"
             )
+        # The primary pair (one pair, or the one with an infinite weight) is aligned exactly:
+        # a zero vector there is an error, as in scipy, on host input (NaN for JAX arrays).
+        host_w = None if weights is None else _concrete(weights)
+        primary = 0 if n == 1 else None
+        if host_w is not None and n > 1 and np.sum(np.isinf(host_w)) == 1:
+            primary = int(np.argmax(np.isinf(host_w)))
+        for x in (a, b) if primary is not None else ():
+            host = _concrete(x)
+            if host is not None and not np.any(np.atleast_2d(host)[primary]):
+                raise ValueError("Cannot align zero length primary vectors")
         q, rssd = _align(a2, b2, w)
         rot = Rotation._raw(q)
         if return_sensitivity:

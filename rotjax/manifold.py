@@ -46,6 +46,16 @@ def _is_group(x) -> bool:
     return isinstance(x, (Rotation, _rigid_class()))
 
 
+def _kind(x) -> str:
+    return f"a {type(x).__name__}" if _is_group(x) else "an array"
+
+
+def _check_kind(x, y, what: str) -> None:
+    """`TypeError` unless `y` is what `x` needs: the same group class, or an array."""
+    if _is_group(y) if not _is_group(x) else type(y) is not type(x):
+        raise TypeError(f"{what}: expected {_kind(x)} (as in the first argument), got {_kind(y)}")
+
+
 def _dim(x) -> int:
     return 3 if isinstance(x, Rotation) else 6
 
@@ -119,6 +129,8 @@ def rplus(x: Any, delta: Any) -> Any:
     """
 
     def plus(leaf, d):
+        if _is_group(d):
+            raise TypeError(f"rplus: expected a tangent array for {_kind(leaf)}, got {_kind(d)}")
         if isinstance(leaf, Rotation):
             return leaf * Rotation.from_rotvec(d)
         if _is_group(leaf):
@@ -155,6 +167,7 @@ def rminus(a: Any, b: Any) -> Any:
     """
 
     def minus(x, y):
+        _check_kind(x, y, "rminus")
         if isinstance(x, Rotation):
             return (x.inv() * y).as_rotvec()
         if _is_group(x):

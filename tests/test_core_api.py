@@ -1,6 +1,7 @@
 """API contract: broadcasting, jit/vmap, dtypes, scalar_first, and bad input."""
 
 import inspect
+import itertools
 
 import jax
 import jax.numpy as jnp
@@ -213,6 +214,28 @@ def test_non_unit_quaternions_are_normalised():
         assert_close(rj.quaternion_to_euler(s, "XYZ"), rj.quaternion_to_euler(Q, "XYZ"), atol=1e-14)
         assert_close(rj.quaternion_to_rotvec(s), V, atol=1e-14)
         assert_close(rj.rotation_angle(s), rj.rotation_angle(Q), atol=1e-15)
+
+
+def test_quaternions_with_exact_matrices_give_exact_entries():
+    # 90 and 180 degrees about each axis, at unit, power-of-two and other norms: the entries
+    # that cancel are exactly 0 (scipy's too) at any norm, the others exactly +-1 where
+    # |q|^2 times its rounded reciprocal is 1 (here)
+    axes = np.eye(3)
+    q90 = np.concatenate([axes, np.ones((3, 1))], axis=-1)
+    q180 = np.concatenate([axes, np.zeros((3, 1))], axis=-1)
+    cases = [(np.concatenate([q90, -q90, q180]), [1.0, 0.5, 3.0, 2.0**-600, 2.0**600])]
+    cases += [(q90 / np.sqrt(2), [1.0, 0.5, 2.0**-600])]  # unit, rounded
+    for q, scales in cases:
+        expected = np.round(ScipyRotation.from_quat(q).as_matrix())
+        for scale, dtype in itertools.product(scales, (np.float32, np.float64)):
+            if dtype == np.float32 and not 1e-30 < scale < 1e30:
+                continue
+            m = np.asarray(rj.quaternion_to_matrix((scale * q).astype(dtype)))
+            np.testing.assert_array_equal(m, expected, err_msg=f"scale {scale}, {dtype}")
+    q = cases[0][0]
+    zero = np.round(ScipyRotation.from_quat(q).as_matrix()) == 0
+    for scale in [7.0, 1e150]:
+        np.testing.assert_array_equal(np.asarray(rj.quaternion_to_matrix(scale * q))[zero], 0.0)
 
 
 # --- bad input --------------------------------------------------------------------------------

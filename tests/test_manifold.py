@@ -226,3 +226,22 @@ def test_rigid_transform_optional_at_import():
     # manifold handles arrays alone and rotations without touching RigidTransform's module
     x = {"a": jnp.ones(2), "r": rj.Rotation.identity()}
     assert_close(manifold.rplus(x, manifold.zero_tangents(x))["a"], np.ones(2), atol=0)
+
+
+@pytest.mark.parametrize(
+    "a, b, expected",
+    [
+        (rj.Rotation.identity(), rj.RigidTransform.identity(), "expected a Rotation"),
+        (rj.RigidTransform.identity(), rj.Rotation.identity(), "expected a RigidTransform"),
+        (jnp.zeros(3), rj.Rotation.identity(), "expected an array"),
+        (rj.Rotation.identity(), jnp.zeros(3), "expected a Rotation"),
+    ],
+)
+def test_mixed_types_are_a_type_error_naming_the_expected_one(a, b, expected):
+    with pytest.raises(TypeError, match=expected):
+        manifold.rminus({"x": a}, {"x": b})
+
+
+def test_rplus_of_a_group_element_is_a_type_error():
+    with pytest.raises(TypeError, match="expected a tangent array"):
+        manifold.rplus(rj.Rotation.identity(), rj.Rotation.identity())

@@ -223,6 +223,7 @@ def test_shapes_indexing_setitem():
     assert repr(Rotation.identity()).startswith("Rotation.from_matrix(")
 
 
+ZERO_FIRST = np.array([[0.0], [1], [1], [1], [1], [1]])  # V * ZERO_FIRST: V[0] zeroed
 ERRORS = {
     "quat_shape": (ValueError, lambda: Rotation.from_quat(np.ones(3))),
     "zero_quat": (ValueError, lambda: Rotation.from_quat(np.zeros(4))),
@@ -251,6 +252,12 @@ ERRORS = {
     "slerp_range": (ValueError, lambda: Slerp([0, 1], Rotation.from_quat(Q[:2]))(2.0)),
     "slerp_order": (ValueError, lambda: Slerp([1, 0], Rotation.from_quat(Q[:2]))),
     "setitem_type": (TypeError, lambda: Rotation.from_quat(Q).__setitem__(0, 1)),
+    "zero_primary_one_pair": (ValueError, lambda: Rotation.align_vectors([0, 0, 0], V[0])),
+    "zero_primary_b": (ValueError, lambda: Rotation.align_vectors(V[:1], np.zeros((1, 3)))),
+    "zero_primary_inf": (
+        ValueError,
+        lambda: Rotation.align_vectors(V * ZERO_FIRST, V, [np.inf] + [1.0] * 5),
+    ),
 }
 
 
@@ -259,6 +266,20 @@ def test_errors(name):
     exc, f = ERRORS[name]
     with pytest.raises(exc):
         f()
+
+
+def test_zero_primary_vector_message_and_nan_for_jax_arrays():
+    with pytest.raises(ValueError, match="Cannot align zero length primary vectors"):
+        Rotation.align_vectors(np.zeros((1, 3)), V[:1])
+    # a zero vector that is not primary is no error: it has no weight in the fit
+    Rotation.align_vectors(V * ZERO_FIRST, V)
+    r, rssd = Rotation.align_vectors(jnp.zeros((1, 3)), jnp.asarray(V[:1]))
+    assert np.all(np.isnan(r.as_quat())) and np.isnan(rssd)
+
+
+def test_align_vectors_batched_input_names_both_shapes():
+    with pytest.raises(ValueError, match="Expected inputs `a` and `b` to have shape"):
+        Rotation.align_vectors(V[None], V[None])
 
 
 def test_values_under_jit_give_nan():

@@ -127,17 +127,20 @@ def _bound(b) -> str:
 
 
 def _accuracy_table(rows) -> str:
+    # Five columns that fit the 1280-pixel layout: the method under the operation, bound and
+    # measured in one cell per dtype, and the test's file above its name (no name is split).
     out = [
-        "| operation | method | compared | float64 bound | float64 measured "
-        "| float32 bound | float32 measured | asserted by |",
-        "|---|---|---|---:|---:|---:|---:|---|",
+        "| operation | compared | float64 bound / measured | float32 bound / measured "
+        "| asserted by |",
+        "|---|---|---:|---:|---|",
     ]
     for op, method, b64, b32, what, test in BOUNDS:
         m64 = _measured(rows, op, method, "float64")
         m32 = _measured(rows, op, method, "float32")
+        where, name = test.split("::")
         out.append(
-            f"| `{op}` | {method or '-'} | {what} | {_bound(b64)} | {_fmt(m64)} "
-            f"| {_bound(b32)} | {_fmt(m32)} | `{test}` |"
+            f"| `{op}`{f'<br>{method}' if method else ''} | {what} | {_bound(b64)} / {_fmt(m64)} "
+            f"| {_bound(b32)} / {_fmt(m32)} | `{where}`<br>`{name}` |"
         )
     return "\n".join(out)
 

@@ -1,15 +1,17 @@
-"""MkDocs hook: the API page must document every name in ``rotjax.__all__``.
+"""MkDocs hook: the API reference (``docs/api/*.md``, one page per area) must document every
+name in ``rotjax.__all__`` exactly once.
 
 ``__all__`` and the explicit re-exports (``from ._x import f as f``) are read from
-``rotjax/__init__.py`` without importing the package. The build fails if they differ, or if a
-public name has no ``::: rotjax.<name>`` entry on the API page (or an entry names a function
-that is not public).
+``rotjax/__init__.py`` without importing the package. The build fails if they differ, if a
+public name has no ``::: rotjax.<name>`` entry in the reference or more than one, or if an
+entry names a function that is not public.
 """
 
 from __future__ import annotations
 
 import ast
 import re
+from collections import Counter
 from pathlib import Path
 
 INIT = Path(__file__).resolve().parents[2] / "rotjax" / "__init__.py"
@@ -34,14 +36,19 @@ def _public_names() -> set[str]:
     raise ValueError(f"{INIT} defines no __all__")
 
 
-def on_page_markdown(markdown, page, config, files):
-    if page.file.src_uri != "api.md":
-        return markdown
-    listed = set(re.findall(r"^::: rotjax\.(\w+)", markdown, flags=re.M))
+def on_files(files, config):
+    entries = Counter()
+    for f in files:
+        if f.src_uri.startswith("api/") and f.src_uri.endswith(".md"):
+            text = Path(f.abs_src_path).read_text()
+            entries.update(re.findall(r"^::: rotjax\.(\w+)", text, flags=re.M))
     public = _public_names()
-    if listed != public:
+    listed = set(entries)
+    twice = sorted(name for name, n in entries.items() if n > 1)
+    if listed != public or twice:
         raise ValueError(
-            "docs/api.md and rotjax.__all__ differ: missing "
-            f"{sorted(public - listed)}, not public {sorted(listed - public)}"
+            "docs/api/ and rotjax.__all__ differ: missing "
+            f"{sorted(public - listed)}, not public {sorted(listed - public)}, "
+            f"listed more than once {twice}"
         )
-    return markdown
+    return files

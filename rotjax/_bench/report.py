@@ -420,7 +420,9 @@ def figure(meta, rows, panel):
     from matplotlib.lines import Line2D
 
     _, op, set_name, title = panel
-    names = sorted({contender(r) for r in rows if r["op"] == op and r["impl"] != "copy"})
+    # One colour per contender across every plot: assigned over all the plotted operations.
+    plotted = {p[1] for p in panels(rows)}
+    names = sorted({contender(r) for r in rows if r["op"] in plotted and r["impl"] != "copy"})
     cmap = plt.get_cmap("tab10" if len(names) <= 10 else "tab20")
     colour = {name: cmap(i % cmap.N) for i, name in enumerate(names)}
     width = PLOT_WIDTH_PX / PLOT_DPI
@@ -448,6 +450,7 @@ def figure(meta, rows, panel):
             edgecolors="black",
             linewidths=0.5,
         )
+    ax.margins(0.1)  # room for the markers at the ends: none clipped at the axes
     for axis in (ax.xaxis, ax.yaxis):
         _log_axis(axis)
     ax.set_xlabel("throughput (million rotations/s, higher is better)", fontsize=9)
