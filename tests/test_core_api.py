@@ -13,12 +13,12 @@ from helpers import (
     SET_AXIS,
     assert_close,
     assert_same_rotation,
+    check_grads,
     every_public,
     public_inputs,
     random_quaternions,
     sweep,
 )
-from jax.test_util import check_grads
 from scipy.spatial.transform import Rotation as ScipyRotation
 
 import rotjax as rj

@@ -11,12 +11,12 @@ from helpers import (
     DTYPES,
     assert_close,
     assert_same_rotation,
+    check_grads,
     fd_jacobian,
     random_quaternions,
     sweep,
     ulp,
 )
-from jax.test_util import check_grads
 from scipy.spatial.transform import Rotation, Slerp
 
 import rotjax as rj
