@@ -2,18 +2,21 @@
 (JAX's own test setting: a constant of shape ``(4,)`` must not broadcast silently against a
 ``(..., 4)`` batch), a deadline-free profile.
 
-Compiled programs are shared through JAX's persistent compilation cache, in a new temporary
-folder for each pytest run, which its xdist workers (and the notebooks' kernels) share and which
-is removed at its end: a program compiled by one test or worker is loaded, not compiled again,
-by the others. The cache never outlives the run, so no program compiled from other code can be
-loaded. Tracing and lowering still run every time (errors raised while tracing are raised as
-before).
+Compiled programs are shared through JAX's persistent compilation cache, which the xdist
+workers (and the notebooks' kernels) share: a program compiled by one test or worker is loaded,
+not compiled again, by the others. Locally the cache is kept between runs, so a rerun compiles
+only what changed: ``$ROTJAX_TEST_CACHE`` or ``~/.cache/rotjax/tests-jax-cache`` (under
+``$XDG_CACHE_HOME`` if set); delete the folder for a cold run. JAX's cache key covers the
+program, the compile options, the backend and the JAX and jaxlib versions, so an entry compiled
+from other code is never loaded. In CI (``CI`` set to true) each run gets a fresh folder,
+removed at its end. Tracing and lowering still run every time (errors raised while tracing are
+raised as before).
 
 The exhaustive sweeps are marked ``slow`` and left out of the default run (``-m "not slow"``
 in pyproject.toml's addopts): the Euler sequences outside ``helpers.FAST_SEQS`` (marked here),
 the cases that ``helpers.sweep`` leaves out, and a few whole second-derivative checks (marked
-where they are defined). ``-m slow`` runs them, ``-m ""`` everything. With ``-n``, each test
-file runs in one worker (``--dist loadfile``), so that its parametrizations share programs."""
+where they are defined). ``-m slow`` runs them, ``-m ""`` everything. With ``-n``, xdist's
+``worksteal`` scheduling keeps both workers busy to the end of the run."""
 
 import os
 import shutil
@@ -28,19 +31,25 @@ jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
-_CACHE_ENV = "ROTJAX_TEST_COMPILATION_CACHE"
+_CACHE_ENV = "ROTJAX_TEST_CACHE"
+_FRESH_ENV = "ROTJAX_TEST_FRESH_CACHE"  # the folder of a CI run, passed to its xdist workers
 
 
 def _compilation_cache_dir() -> tuple[str, bool]:
-    """The run's cache folder, and whether this process made it (and removes it). An xdist
-    worker takes its controller's, passed in the environment; any other process makes a new
-    one, whatever the environment says."""
-    inherited = os.environ.get(_CACHE_ENV)
-    if os.environ.get("PYTEST_XDIST_WORKER") and inherited and os.path.isdir(inherited):
-        return inherited, False
-    path = tempfile.mkdtemp(prefix="rotjax-jax-cache-")
-    os.environ[_CACHE_ENV] = path  # inherited by the xdist workers started after this
-    return path, True
+    """The cache folder, and whether this process made it and removes it at its end: in CI a
+    new temporary folder per run (an xdist worker takes its controller's, passed in the
+    environment), else a kept folder."""
+    if os.environ.get("CI", "").lower() in ("true", "1"):
+        inherited = os.environ.get(_FRESH_ENV)
+        if os.environ.get("PYTEST_XDIST_WORKER") and inherited and os.path.isdir(inherited):
+            return inherited, False
+        path = tempfile.mkdtemp(prefix="rotjax-jax-cache-")
+        os.environ[_FRESH_ENV] = path  # inherited by the xdist workers started after this
+        return path, True
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    path = os.environ.get(_CACHE_ENV) or os.path.join(base, "rotjax", "tests-jax-cache")
+    os.makedirs(path, exist_ok=True)
+    return path, False
 
 
 _CACHE_DIR, _OWN_CACHE = _compilation_cache_dir()

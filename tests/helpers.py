@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from functools import partial
+
 import hypothesis.extra.numpy as hnp
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from hypothesis import strategies as st
+from jax.test_util import check_jvp, check_vjp
 
 import rotjax as rj
 
@@ -87,6 +91,36 @@ def fd_jacobian(f, x, h=1e-6):
             np.asarray(f(jnp.asarray(x + e))) - np.asarray(f(jnp.asarray(x - e)))
         ) / (2 * h)
     return jac
+
+
+def check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps=None):
+    """``jax.test_util.check_grads`` with each program jitted: the same checks (the same random
+    directions, finite differences, tolerances and assertions, by JAX's ``check_jvp`` and
+    ``check_vjp``), but ``f``, its JVP and its VJP at each order are each one jitted program
+    (the finite differences call the jitted ``f``), where the eager version dispatches the
+    derivatives of its parts one by one, each a program of its own."""
+    eps = eps or 1e-4  # check_grads' default step
+
+    def check(f, args, order, err_msg):
+        fj = jax.jit(f)
+        if "fwd" in modes:
+            msg = f"JVP of {err_msg}" if err_msg else "JVP"
+            check_jvp(fj, jax.jit(partial(jax.jvp, f)), args, atol, rtol, eps, msg)
+            if order > 1:
+                check(partial(jax.jvp, f), (args, args), order - 1, msg)
+        if "rev" in modes:
+            msg = f"VJP of {err_msg}" if err_msg else "VJP"
+            pull = jax.jit(lambda a, ct: jax.vjp(f, *a)[1](ct))
+            check_vjp(fj, lambda *a: (fj(*a), partial(pull, a)), args, atol, rtol, eps, msg)
+            if order > 1:
+
+                def f_vjp(*a):
+                    out, vjp = jax.vjp(f, *a)
+                    return vjp(out)
+
+                check(f_vjp, args, order - 1, msg)
+
+    check(f, tuple(args), order, "")
 
 
 # --- one call of every public function ------------------------------------------------------
@@ -259,10 +293,13 @@ def every_public(q, r, w, a):
 
 def public_inputs(n, dtype):
     """The inputs of :func:`every_public` for ``n`` random rotations (seed 21), in ``dtype``:
-    quaternions, their matrices, rotation vectors and ZYX angles."""
+    quaternions, their matrices, rotation vectors and ZYX angles (by scipy: no program is
+    compiled when a test module builds them at import)."""
+    from scipy.spatial.transform import Rotation
+
     q = random_quaternions(n, seed=21)
-    derived = rj.quaternion_to_matrix(q), rj.quaternion_to_rotvec(q)
-    derived += (rj.quaternion_to_euler(q, "ZYX"),)
+    rot = Rotation.from_quat(q)
+    derived = rot.as_matrix(), rot.as_rotvec(), rot.as_euler("ZYX")
     return [np.asarray(x).astype(dtype) for x in (q, *derived)]
 
 

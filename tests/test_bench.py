@@ -14,8 +14,7 @@ import jax.numpy as jnp
 import mpmath as mp
 import numpy as np
 import pytest
-from helpers import SEQS, sweep, ulp
-from jax.test_util import check_grads
+from helpers import SEQS, check_grads, sweep, ulp
 
 import rotjax as rj
 from rotjax._bench import accuracy as A
@@ -244,6 +243,7 @@ if "scipy-jax" in peers:
 """
 
 
+@pytest.mark.slow  # a subprocess importing scipy and JAX
 @pytest.mark.parametrize("flag", ["1", None])
 def test_scipy_on_jax_is_a_jitted_peer_only_with_the_array_api(flag):
     """With SCIPY_ARRAY_API=1 scipy's Rotation is a peer on JAX arrays: traced by jax.jit into

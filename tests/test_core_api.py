@@ -14,20 +14,16 @@ from helpers import (
     SET_AXIS,
     assert_close,
     assert_same_rotation,
+    check_grads,
     every_public,
     public_inputs,
-    random_quaternions,
     sweep,
 )
-from jax.test_util import check_grads
 from scipy.spatial.transform import Rotation as ScipyRotation
 
 import rotjax as rj
 
-Q = random_quaternions(64, seed=21)
-R = np.asarray(rj.quaternion_to_matrix(Q))
-V = np.asarray(rj.quaternion_to_rotvec(Q))
-A = np.asarray(rj.quaternion_to_euler(Q, "ZYX"))
+Q, R, V, A = public_inputs(64, np.float64)  # by scipy, at import
 
 # (function, positional inputs built from a flat batch of 64 rotations, trailing input ndims)
 UNARY = {

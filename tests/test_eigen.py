@@ -5,8 +5,7 @@ import jax.numpy as jnp
 import mpmath
 import numpy as np
 import pytest
-from helpers import sweep
-from jax.test_util import check_grads
+from helpers import check_grads, sweep
 from scipy.spatial.transform import Rotation
 
 import rotjax as rj

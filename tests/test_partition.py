@@ -8,8 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import assert_close, sweep
-from jax.test_util import check_grads
+from helpers import assert_close, check_grads, sweep
 
 import rotjax as rj
 

@@ -135,6 +135,7 @@ _ARITHMETIC = r"= (?:fadd|fsub|fmul|fdiv|fneg|fcmp \w+) (?:\w+ )*"
 _FULL_WIDTH = {"float32": "<8 x float>", "float64": "<4 x double>"}
 
 
+@pytest.mark.slow  # a subprocess compiling every conversion without the cache
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="reads XLA:CPU's LLVM code")
 def test_loops_are_vectorised(tmp_path):
     """Every loop of every conversion above and of its jit(grad), in both dtypes, computes with

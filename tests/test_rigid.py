@@ -9,10 +9,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import assert_close, assert_same_rotation
+from helpers import assert_close, assert_same_rotation, check_grads
 from hypothesis import example, given
 from hypothesis import strategies as st
-from jax.test_util import check_grads
 from scipy.spatial.transform import RigidTransform as SciTf
 from scipy.spatial.transform import Rotation as SciRot
 from scipy.spatial.transform._rigid_transform import normalize_dual_quaternion as sci_normalize

@@ -6,6 +6,8 @@ exp/log compositions (the Jacobians' defining relations), and mpmath's power ser
 exponential and of its Jacobians (sum ad^n / (n+1)!) at 50 digits, which are independent of
 the closed forms and judge tiny angles, the series/closed-form switch and 180 degrees."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import mpmath as mp
@@ -93,30 +95,28 @@ def _mp_vec(x):
     return [mp.mpf(float(v)) for v in x]
 
 
-def _mp_refs(xi):
-    """Reference exp, Jl, Jr and inverses of SE(3) and SO(3) at float64 ``xi``."""
-    x = _mp_vec(xi)
-    ad = _mp_ad(x)
-    P = _mp_hat(x[:3])
-    jl, jr = _mp_series(ad, 1), _mp_series(-ad, 1)
-    return {
-        "se3_exp": _np(_mp_series(_mp_twist(x), 0)),
-        "se3_left_jacobian": _np(jl),
-        "se3_right_jacobian": _np(jr),
-        "se3_left_jacobian_inverse": _np(mp.inverse(jl)),
-        "se3_right_jacobian_inverse": _np(mp.inverse(jr)),
-        "so3_left_jacobian": _np(_mp_series(P, 1)),
-        "so3_right_jacobian": _np(_mp_series(-P, 1)),
-        "so3_left_jacobian_inverse": _np(mp.inverse(_mp_series(P, 1))),
-        "so3_right_jacobian_inverse": _np(mp.inverse(_mp_series(-P, 1))),
-    }
+_MP_FUNS = {  # reference exp, Jl, Jr and inverses of SE(3) and SO(3), of mpf coordinates
+    "se3_exp": lambda x: _mp_series(_mp_twist(x), 0),
+    "se3_left_jacobian": lambda x: _mp_series(_mp_ad(x), 1),
+    "se3_right_jacobian": lambda x: _mp_series(-_mp_ad(x), 1),
+    "se3_left_jacobian_inverse": lambda x: mp.inverse(_mp_series(_mp_ad(x), 1)),
+    "se3_right_jacobian_inverse": lambda x: mp.inverse(_mp_series(-_mp_ad(x), 1)),
+    "so3_left_jacobian": lambda x: _mp_series(_mp_hat(x[:3]), 1),
+    "so3_right_jacobian": lambda x: _mp_series(-_mp_hat(x[:3]), 1),
+    "so3_left_jacobian_inverse": lambda x: mp.inverse(_mp_series(_mp_hat(x[:3]), 1)),
+    "so3_right_jacobian_inverse": lambda x: mp.inverse(_mp_series(-_mp_hat(x[:3]), 1)),
+}
+SE3_FUNS = [f for f in _MP_FUNS if f.startswith("se3")]
+SO3_FUNS = [f for f in _MP_FUNS if f.startswith("so3")]
 
 
-MP_REFS = [_mp_refs(xi) for xi in XIS]
-# at the float32-rounded inputs (float32 rounds the angle, which moves the result)
-MP_REFS32 = [_mp_refs(xi) for xi in XIS.astype(np.float32).astype(np.float64)]
-SE3_FUNS = [f for f in MP_REFS[0] if f.startswith("se3")]
-SO3_FUNS = [f for f in MP_REFS[0] if f.startswith("so3")]
+@functools.cache
+def mp_refs(name, dtype):
+    """``name``'s references at each of XIS, as float64 arrays; for float32 at the
+    float32-rounded inputs (float32 rounds the angle, which moves the result). Computed when
+    a test first asks (not at collection, in every worker)."""
+    xis = XIS if dtype == np.float64 else XIS.astype(np.float32).astype(np.float64)
+    return [_np(_MP_FUNS[name](_mp_vec(xi))) for xi in xis]
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64], ids=lambda d: d.__name__)
@@ -130,8 +130,7 @@ def test_against_mpmath_series(name, dtype):
     arg = x if name.startswith("se3") else x[:, :3]
     got = np.asarray(getattr(rj, name)(arg))
     assert got.dtype == dtype
-    for i, ref in enumerate(MP_REFS if dtype == np.float64 else MP_REFS32):
-        want = ref[name]
+    for i, want in enumerate(mp_refs(name, dtype)):
         err = np.abs(got[i] - want).max() / max(1.0, np.abs(want).max())
         assert np.isfinite(got[i]).all()
         assert err <= 4 * EPS[dtype], (name, ANGLES[i], err / EPS[dtype])
@@ -142,7 +141,7 @@ def test_se3_log_is_the_inverse_of_the_mpmath_exponential():
     4 eps (a backward error: at pi the log's direction is ill-conditioned, its exp is not);
     below pi the log is also the original coordinates to 4 eps times the condition number
     1 / sin-like factor (|xi| eps / (pi - t) at worst, so a plain 64 eps off pi)."""
-    T = np.stack([r["se3_exp"] for r in MP_REFS])
+    T = np.stack(mp_refs("se3_exp", np.float64))
     logs = np.asarray(rj.se3_log(T))
     for i, xi in enumerate(logs):
         back = _np(_mp_series(_mp_twist(_mp_vec(xi)), 0))
