@@ -19,6 +19,7 @@ from ._numerics import (
     exponent_scale,
     from_scalar_last,
     public,
+    recorded,
     select,
     stack,
     to_scalar_last,
@@ -201,7 +202,10 @@ def _quat_to_euler(q, seq):
     # The angles stacked on the last axis: XLA:CPU writes them in vectorised loops (a stack on
     # a leading axis gave one narrow loop here; after the Shepperd column, in matrix_to_euler,
     # it gives one full-width loop).
-    return jnp.stack(_quat_to_euler_parts(tuple(unstack(q)), seq), axis=-1)
+    angles = _quat_to_euler_parts(tuple(unstack(q)), seq)
+    if recorded(q):  # after the operation that computed q (as matrix_to_euler's, one loop)
+        return stack(angles, branches=True)
+    return jnp.stack(angles, axis=-1)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))

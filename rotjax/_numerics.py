@@ -179,13 +179,19 @@ def _note(out, parts) -> None:
         _PARTS[key] = (weakref.ref(out, lambda _, key=key: _PARTS.pop(key, None)), tuple(parts))
 
 
+def recorded(x) -> bool:
+    """Whether ``x`` is a result of :func:`stack` in this trace (whose parts :func:`unstack`
+    returns)."""
+    hit = _PARTS.get(id(x))
+    return hit is not None and hit[0]() is x
+
+
 def unstack(x):
     """The components of ``x`` along its last axis, as per-rotation arrays: the one way rotjax
     reads a stacked array. For an array that :func:`stack` returned in the same trace, the parts
     it was given; else slices."""
-    hit = _PARTS.get(id(x))
-    if hit is not None and hit[0]() is x:
-        return list(hit[1])
+    if recorded(x):
+        return list(_PARTS[id(x)][1])
     return list(_read(x))
 
 
