@@ -146,8 +146,8 @@ def _inv_coeffs(p):
 def _recip_k(k):
     """``1 / k`` for ``k = sin(t/2)/t`` (``1/pi <= k <= 1/2`` on ``[0, pi]``; 0 at ``t = 2 pi``,
     where the inverse Jacobians are singular)."""
-    r = rsqrt(k * k)
-    return r * r
+    r = rsqrt(k * k)  # 1 / |k|
+    return (r * r) * k
 
 
 def exp_parts(p, r):
@@ -189,7 +189,7 @@ def _q_matrix(p, r):
     ``Q = 1/2 R + b (P R + R P + P R P) + d (P P R + R P P - 3 P R P)
     + f (P R P P + P P R P)``, with ``P = hat(p)``, ``R = hat(r)``, ``b = (t - sin t)/t^3``,
     ``d = (t^2 + 2 cos t - 2)/(2 t^4)`` and ``f = (2t - 3 sin t + t cos t)/(2 t^5)``."""
-    x, k, c, a, b = _so3_coeffs(p)
+    x, k, c, a, b = _so3_coeffs(unstack(p))
     d = _series(x, _SERIES_D, lambda xb: (1 - 4 * k * k) / (2 * xb))
     # 2 - 3 sin t / t + cos t, with sin t / t = 2 k c and cos t = c^2 - (k t)^2.
     f = _series(x, _SERIES_F, lambda xb: (2 - 6 * k * c + c * c - k * k * xb) / (2 * xb * xb))
