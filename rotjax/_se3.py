@@ -94,7 +94,8 @@ def _recip(x):
     squared, multiplications and additions only, so that a result built on it stays one loop
     (XLA writes a division read by several components in a loop of its own)."""
     r = rsqrt(x)
-    return r * r
+    y = r * r
+    return y + y * (1 - x * y)  # a Newton step: to about half an ulp
 
 
 def _b_coeff(x, k, c):
@@ -147,7 +148,8 @@ def _recip_k(k):
     """``1 / k`` for ``k = sin(t/2)/t`` (``1/pi <= k <= 1/2`` on ``[0, pi]``; 0 at ``t = 2 pi``,
     where the inverse Jacobians are singular)."""
     r = rsqrt(k * k)  # 1 / |k|
-    return (r * r) * k
+    y = (r * r) * k
+    return y + y * (1 - k * y)  # a Newton step: to about half an ulp
 
 
 def exp_parts(p, r):
