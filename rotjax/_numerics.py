@@ -95,18 +95,12 @@ def like_rank(c, x, dtype=None):
 
 def to_scalar_last(q, scalar_first: bool):
     """Reorder a quaternion to the internal scalar-last `(x, y, z, w)` layout."""
-    if not scalar_first:
-        return q
-    w, x, y, z = unstack(q)
-    return stack([x, y, z, w])
+    return jnp.roll(q, -1, axis=-1) if scalar_first else q
 
 
 def from_scalar_last(q, scalar_first: bool):
     """Reorder an internal scalar-last quaternion to the caller's layout."""
-    if not scalar_first:
-        return q
-    x, y, z, w = unstack(q)
-    return stack([w, x, y, z])
+    return jnp.roll(q, 1, axis=-1) if scalar_first else q
 
 
 def exponent_scale(x):
