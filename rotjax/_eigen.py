@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from ._elementary import rsqrt
-from ._numerics import TIE_ULPS, eps, max_abs, safe_div, select, stack_scaled
+from ._numerics import TIE_ULPS, eps, max_abs, safe_div, select
 from ._quaternion import _multiply, _to_matrix
 from ._shepperd import k4_columns, masks_once, select_column
 
@@ -224,7 +224,8 @@ def _polar(B, nan_at_zero=True):
     c, n = select_column(*k4_columns(entries), pick=masks_once)
     flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
     inv = rsqrt(n)
-    q = stack_scaled(c, jnp.where(flip, -inv, inv))
+    k = jnp.where(flip, -inv, inv)
+    q = jnp.moveaxis(jnp.stack(c, axis=0) * k[None], 0, -1)  # one transposing loop, as before
     s = jnp.stack([_dot3(ua, wa), _dot3(ub, wb), _dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)
 
