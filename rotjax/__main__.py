@@ -1,4 +1,4 @@
-"""`python -m rotjax`: a short demo of the conversions on the seeds' worked examples.
+"""`python -m rotjax`: a short demo of the conversions on Nikravesh's worked examples.
 
 `python -m rotjax bench [--quick] [--out DIR]` runs the speed/accuracy benchmark;
 `python -m rotjax bench report` regenerates its tables and plot from `docs/bench.json`.

@@ -1,4 +1,5 @@
-"""The demo behind `python -m rotjax`: the seeds' worked examples, converted every way."""
+"""The demo behind `python -m rotjax`: worked examples from Nikravesh (1988), converted every
+way."""
 
 from __future__ import annotations
 

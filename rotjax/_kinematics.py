@@ -5,7 +5,8 @@ Conventions (see the README's Conventions table):
 * `R` is active, `v_world = R @ v_body`; quaternions are scalar last and Hamilton.
 * `frame="body"`: the angular velocity in body axes, `omega_body = vee(R.T @ dR/dt)`.
 * `frame="world"`: the angular velocity in world axes, `omega_world = vee(dR/dt @ R.T)`
-  (the Simscape seed's `Omega = dR/dt R^T`). `omega_world = R @ omega_body`.
+  (the spatial angular-velocity tensor `Omega = dR/dt R^T`, Nikravesh 1988).
+  `omega_world = R @ omega_body`.
 
 Euler-angle rates are reduced to one closed form: the *intrinsic* sequence in the *body* frame.
 With `R = R_i(a0) R_j(a1) R_k(a2)`, each angle rate spins the body about its own rotation axis
@@ -337,7 +338,7 @@ def _pure(omega):
 
 def _quat_rate(q, omega, frame):
     # body: q' = q * (omega_b, 0) / 2;  world: q' = (omega_w, 0) * q / 2  (R(p q) = R(p) R(q)).
-    # The Simscape seed's "q_v' = (q_s w - q_v x w) / 2" is the world-frame form.
+    # "q_v' = (q_s w - q_v x w) / 2" (Markley & Crassidis 2014) is the world-frame form.
     w = _pure(omega)
     return 0.5 * (_multiply(q, w) if frame == "body" else _multiply(w, q))
 
@@ -432,7 +433,7 @@ def matrix_derivative_to_angular_velocity(
         R: `(..., 3, 3)` active rotation matrix.
         R_dot: `(..., 3, 3)` its time derivative; broadcasts against `R`.
         frame: `"body"` (`omega = vee(R.T @ R_dot)`) or `"world"`
-            (`omega = vee(R_dot @ R.T)`, the Simscape seed's `Omega = dR/dt R^T`).
+            (`omega = vee(R_dot @ R.T)`, the spatial angular-velocity tensor `Omega = dR/dt R^T`).
 
     Returns:
         `(..., 3)` angular velocity in `frame`. `vee` reads the antisymmetric part, so a
@@ -607,8 +608,8 @@ def unwrap_euler(angles: ArrayLike, seq: str, axis: int = 0) -> Array:
 
     Note:
         The second solution set is `(a0 + pi, pi - a1, a2 + pi)` for Tait-Bryan sequences and
-        `(a0 + pi, -a1, a2 + pi)` for proper Euler sequences (the MapleSim seed's
-        `a1 +- pi` and `a1` are wrong; see the tests). A middle angle that runs through
+        `(a0 + pi, -a1, a2 + pi)` for proper Euler sequences (checked against
+        `euler_to_quaternion` in the tests). A middle angle that runs through
         the edge of its principal range therefore continues smoothly past it. Only the sum or
         difference of the outer angles is defined at exact gimbal lock; there the choice
         follows the previous sample, so the output stays continuous if the input sampling
