@@ -398,18 +398,30 @@ def _traced(tree) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
 
 
+try:  # JAX's own test of a jit trace on the stack (its trace state has no public reader)
+    from jax._src.core import unsafe_am_i_under_a_jit as _under_jit
+except ImportError:  # pragma: no cover - older or newer JAX: inline under any trace
+    _under_jit = None
+
+
+def _staged(tree) -> bool:
+    """Whether a call with these arguments is being staged into a caller's jitted program: its
+    arguments are tracers and a jit trace is on the stack (eager ``vmap`` or ``grad`` is not)."""
+    return _traced(tree) and (_under_jit is None or _under_jit())
+
+
 def jit(fun=None, *, static_argnames=()):
-    """``jax.jit`` for a call made with concrete arrays; inside a trace (the caller's jit,
-    grad or vmap) the function is inlined, so that the caller's program holds no nested jit per
-    call (less to trace and compile) and :func:`unstack` sees the stacked results of this call.
-    """
+    """``jax.jit``, except inside a caller's jit (under its grad or vmap too), where the function
+    is inlined: the caller's program holds no nested jit per call (less to trace and compile)
+    and :func:`unstack` sees the stacked results of this call. Eager ``vmap``/``grad`` call the
+    jitted function, as one compiled program."""
     if fun is None:
         return functools.partial(jit, static_argnames=static_argnames)
     jitted = jax.jit(fun, static_argnames=static_argnames)
 
     @functools.wraps(fun)
     def call(*args, **kwargs):
-        if _traced((args, kwargs)):
+        if _staged((args, kwargs)):
             return fun(*args, **kwargs)
         return jitted(*args, **kwargs)
 

@@ -93,6 +93,23 @@ def fd_jacobian(f, x, h=1e-6):
     return jac
 
 
+def undecorated(kernel, *static, matrix=()):
+    """The function a component kernel's wrapper computes, with the kernel's ``custom_jvp``
+    removed: its arguments split into components by slicing (a matrix, index in ``matrix``,
+    into its nine entries row by row), the results stacked on the last axis. JAX's derivative of
+    this is the reference a hand-written rule must equal."""
+
+    def split(i, x):
+        if i in matrix:
+            return tuple(x[..., r, c] for r in range(3) for c in range(3))
+        return tuple(x[..., k] for k in range(x.shape[-1]))
+
+    def fun(*xs):
+        return jnp.stack(kernel.fun(*(split(i, x) for i, x in enumerate(xs)), *static), axis=-1)
+
+    return fun
+
+
 def check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps=None):
     """``jax.test_util.check_grads`` with each program jitted: the same checks (the same random
     directions, finite differences, tolerances and assertions, by JAX's ``check_jvp`` and

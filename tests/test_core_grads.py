@@ -13,6 +13,7 @@ from helpers import (
     is_proper,
     random_quaternions,
     sweep,
+    undecorated,
 )
 
 import rotjax as rj
@@ -406,6 +407,7 @@ def test_shepperd_hand_written_derivative_equals_autodiff_of_its_formula(which):
     import rotjax._matrix
 
     _shepperd = getattr(rotjax._matrix, which)
+    ref = undecorated(rotjax._matrix._shepperd_parts, matrix=(0,))
     rng = np.random.default_rng(11)
     base = np.stack(
         [SPECIAL_MATRICES[k] for k in sorted(SPECIAL_MATRICES)]
@@ -416,13 +418,13 @@ def test_shepperd_hand_written_derivative_equals_autodiff_of_its_formula(which):
     dR = jnp.asarray(rng.normal(size=R.shape))
     jit = jax.jit  # one compiled program each, not eager dispatch of every operation
     q, jv = jit(lambda R, dR: jax.jvp(_shepperd, (R,), (dR,)))(R, dR)
-    q_ref, jv_ref = jit(lambda R, dR: jax.jvp(_shepperd.fun, (R,), (dR,)))(R, dR)
+    q_ref, jv_ref = jit(lambda R, dR: jax.jvp(ref, (R,), (dR,)))(R, dR)
     assert_close(q, q_ref, atol=1e-15)
     scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
     assert_close(jv / scale, jv_ref / scale, atol=1e-14)
     w = jnp.asarray(rng.normal(size=q.shape))
     g = jit(jax.grad(lambda m: jnp.sum(w * _shepperd(m))))(R)
-    g_ref = jit(jax.grad(lambda m: jnp.sum(w * _shepperd.fun(m))))(R)
+    g_ref = jit(jax.grad(lambda m: jnp.sum(w * ref(m))))(R)
     scale = np.abs(np.asarray(g_ref)).max(axis=(-2, -1), keepdims=True)
     assert_close(g / scale, g_ref / scale, atol=1e-14)
 
@@ -432,7 +434,9 @@ def test_apply_hand_written_derivative_equals_autodiff_of_its_formula():
     derivative of the forward code: quaternions of norms 1e-20 to 1e20, 180 degrees, the
     identity, one quaternion broadcast against many vectors, both dtypes; NaN where q is zero
     or not finite, as JAX's."""
-    from rotjax._quaternion import _apply
+    from rotjax._quaternion import _apply, _apply_parts
+
+    ref = undecorated(_apply_parts)
 
     rng = np.random.default_rng(31)
     special = [[0, 0, 0, 1.0], [1.0, 0, 0, 0], [0, 0.6, 0.8, 0], [1e-9, 0, 0, -1]]
@@ -451,19 +455,17 @@ def test_apply_hand_written_derivative_equals_autodiff_of_its_formula():
         )
         dv = jnp.asarray(rng.normal(size=v.shape), dtype)
         out, jv = jit(lambda a, b, s, t: jax.jvp(_apply, (a, b), (s, t)))(qd, vd, dq, dv)
-        out_ref, jv_ref = jit(lambda a, b, s, t: jax.jvp(_apply.fun, (a, b), (s, t)))(
-            qd, vd, dq, dv
-        )
+        out_ref, jv_ref = jit(lambda a, b, s, t: jax.jvp(ref, (a, b), (s, t)))(qd, vd, dq, dv)
         np.testing.assert_array_equal(out, out_ref)
         assert jv.dtype == dtype and rel(jv, jv_ref).max() < tol
         ct = jnp.asarray(rng.normal(size=out.shape), dtype)
         for qq in (qd, qd[:1]):  # one quaternion broadcast against every vector
             g = jit(jax.grad(lambda a, b: jnp.sum(ct * _apply(a, b)), (0, 1)))(qq, vd)
-            g_ref = jit(jax.grad(lambda a, b: jnp.sum(ct * _apply.fun(a, b)), (0, 1)))(qq, vd)
+            g_ref = jit(jax.grad(lambda a, b: jnp.sum(ct * ref(a, b)), (0, 1)))(qq, vd)
             for x, x_ref in zip(g, g_ref, strict=True):
                 assert x.shape == x_ref.shape and np.all(np.isfinite(np.asarray(x)))
                 assert rel(x, x_ref).max() < tol * (10 if qq.shape[0] == 1 else 1)
-    hess, hess_ref = (jit(jax.hessian(fn, (0, 1))) for fn in (_apply, _apply.fun))
+    hess, hess_ref = (jit(jax.hessian(fn, (0, 1))) for fn in (_apply, ref))
     for i in (0, 1, 5):
         h, h_ref = (
             hess(jnp.asarray(q[i]), jnp.asarray(v[i])),
@@ -474,7 +476,7 @@ def test_apply_hand_written_derivative_equals_autodiff_of_its_formula():
     bad = jnp.array([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]])
     vb = jnp.ones((3, 3))
     g = jax.grad(lambda a: jnp.sum(_apply(a, vb)))(bad)
-    g_ref = jax.grad(lambda a: jnp.sum(_apply.fun(a, vb)))(bad)
+    g_ref = jax.grad(lambda a: jnp.sum(ref(a, vb)))(bad)
     np.testing.assert_array_equal(np.isnan(g), np.isnan(g_ref))
 
 
@@ -482,7 +484,9 @@ def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
     """rotvec_to_quaternion's custom jvp (and its transpose, and second derivatives) equals
     JAX's own derivative of the forward code: the zero vector, the Taylor branch and its edge,
     angles near and at pi, 2 pi and beyond, in both dtypes."""
-    from rotjax._rotvec import _rotvec_to_quat
+    from rotjax._rotvec import _rotvec_to_quat, _rotvec_to_quat_parts
+
+    ref = undecorated(_rotvec_to_quat_parts)
 
     rng = np.random.default_rng(29)
     axes = rng.normal(size=(40, 3))
@@ -495,16 +499,16 @@ def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
         v = jnp.asarray(axes * angles[:, None], dtype)
         dv = jnp.asarray(rng.normal(size=v.shape), dtype)
         out, jv = jit(lambda x, t: jax.jvp(_rotvec_to_quat, (x,), (t,)))(v, dv)
-        out_ref, jv_ref = jit(lambda x, t: jax.jvp(_rotvec_to_quat.fun, (x,), (t,)))(v, dv)
+        out_ref, jv_ref = jit(lambda x, t: jax.jvp(ref, (x,), (t,)))(v, dv)
         np.testing.assert_array_equal(out, out_ref)
         assert jv.dtype == dtype
         assert_close(jv, jv_ref, atol=tol)
         ct = jnp.asarray(rng.normal(size=out.shape), dtype)
         g = jit(jax.grad(lambda x: jnp.sum(ct * _rotvec_to_quat(x))))(v)
-        g_ref = jit(jax.grad(lambda x: jnp.sum(ct * _rotvec_to_quat.fun(x))))(v)
+        g_ref = jit(jax.grad(lambda x: jnp.sum(ct * ref(x))))(v)
         assert np.all(np.isfinite(np.asarray(g)))
         assert_close(g, g_ref, atol=tol * (1 + float(jnp.abs(g_ref).max())))
-    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (_rotvec_to_quat, _rotvec_to_quat.fun))
+    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (_rotvec_to_quat, ref))
     for x in (jnp.zeros(3), jnp.asarray(axes[0] * 1e-5), jnp.asarray(axes[1] * 2.0)):
         h, h_ref = hess(x), hess_ref(x)
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
@@ -519,7 +523,7 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
     (the switch between the two atan forms)."""
     from rotjax._elementary import atan_ratio as _atan_ratio
     from rotjax._mrp import _mrp_scale
-    from rotjax._quaternion import _scaled_vector_part
+    from rotjax._quaternion import _scaled_vector_part, _scaled_vector_parts
     from rotjax._rotvec import _rotvec_scale
 
     k_of, with_w = {"rotvec": (_rotvec_scale, False), "mrp": (_mrp_scale, True)}[which]
@@ -527,7 +531,7 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
     def _quat_to_rotvec(q):
         return _scaled_vector_part(q, k_of, with_w)
 
-    _quat_to_rotvec.fun = lambda q: _scaled_vector_part.fun(q, k_of, with_w)
+    _quat_to_rotvec.fun = undecorated(_scaled_vector_parts, k_of, with_w)
 
     rng = np.random.default_rng(23)
     special = [
@@ -592,9 +596,9 @@ def _euler_test_quaternions(seq):
     return jnp.asarray(np.array(qs))
 
 
-def _assert_rule_equals_autodiff(f, seq, x, dx, rng, compiled=False, min_same=None):
-    """The custom jvp of ``f(x, seq)`` (a jax.custom_jvp) and its transpose equal JAX's own
-    derivatives of the undecorated code ``f.fun``, row by row, relative to each row's size.
+def _assert_rule_equals_autodiff(f, ref, seq, x, dx, rng, compiled=False, min_same=None):
+    """The custom jvp of ``f(x, seq)`` and its transpose equal JAX's own derivatives of
+    ``ref(x)``, the same code without the rule, row by row, relative to each row's size.
 
     ``compiled``: each derivative is one jitted program (else dispatched eagerly).
     ``min_same``: None, the two primals must be equal; else the rows whose primals differ by
@@ -602,7 +606,7 @@ def _assert_rule_equals_autodiff(f, seq, x, dx, rng, compiled=False, min_same=No
     code rounds its primal differently, by an ulp or so; where that moves a point across a lock
     test, it differentiates another branch). Returns the rule's primal."""
     g = lambda v: f(v, seq)  # noqa: E731
-    g_ref = lambda v: f.fun(v, seq)  # noqa: E731
+    g_ref = ref
     wrap = jax.jit if compiled else (lambda fn: fn)
     out, jv = wrap(lambda v, d: jax.jvp(g, (v,), (d,)))(x, dx)
     out_ref, jv_ref = wrap(lambda v, d: jax.jvp(g_ref, (v,), (d,)))(x, dx)
@@ -630,7 +634,7 @@ def test_matrix_to_euler_rule_equals_autodiff_of_its_formula(seq):
     rule) and its transpose equal JAX's own derivative of the forward code: the matrices of
     quaternions of any norm, near and exactly at lock and at 180 degrees, scaled by 1e-20 to
     1e20, with noise, and random matrices."""
-    from rotjax._euler import _matrix_to_euler
+    from rotjax._euler import _matrix_to_euler, _matrix_to_euler_parts
 
     rng = np.random.default_rng(23)
     R = np.asarray(rj.quaternion_to_matrix(_euler_test_quaternions(seq)))
@@ -638,7 +642,14 @@ def test_matrix_to_euler_rule_equals_autodiff_of_its_formula(seq):
     R = jnp.asarray(R * np.exp(rng.uniform(-46, 46, size=(len(R), 1, 1))))
     dR = jnp.asarray(rng.normal(size=R.shape)) * jnp.abs(R).max(axis=(-2, -1), keepdims=True)
     out = _assert_rule_equals_autodiff(
-        _matrix_to_euler, seq, R, dR, rng, compiled=True, min_same=0.85
+        _matrix_to_euler,
+        undecorated(_matrix_to_euler_parts, seq, matrix=(0,)),
+        seq,
+        R,
+        dR,
+        rng,
+        compiled=True,
+        min_same=0.85,
     )
     assert_close(angle_diff(out, rj.matrix_to_euler(R, seq)), 0, atol=1e-15)  # the forward's
 
@@ -648,15 +659,17 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     """quaternion_to_euler's custom jvp (and its transpose) equals JAX's own derivative of the
     forward code, everywhere: generic points of any norm, near and exactly at lock (where the
     forward code's selects define the gradient rule), 180 degrees; second derivatives too."""
-    from rotjax._euler import _quat_to_euler
+    from rotjax._euler import _quat_to_euler, _quat_to_euler_parts
+
+    ref = undecorated(_quat_to_euler_parts, seq)
 
     q = _euler_test_quaternions(seq)
     rng = np.random.default_rng(5)
     dq = jnp.asarray(rng.normal(size=q.shape)) * jnp.linalg.norm(q, axis=-1, keepdims=True)
-    _assert_rule_equals_autodiff(_quat_to_euler, seq, q, dq, rng)
+    _assert_rule_equals_autodiff(_quat_to_euler, ref, seq, q, dq, rng)
     # second derivatives, compiled once for both points: generic, exact lock
     hess = jax.jit(jax.hessian(lambda x: _quat_to_euler(x, seq)))
-    hess_ref = jax.jit(jax.hessian(lambda x: _quat_to_euler.fun(x, seq)))
+    hess_ref = jax.jit(jax.hessian(ref))
     for x in (q[0] / jnp.linalg.norm(q[0]), q[-4]):
         h, h_ref = hess(x), hess_ref(x)
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
