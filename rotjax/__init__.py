@@ -29,36 +29,16 @@ from ._fitting import nined_to_matrix as nined_to_matrix
 from ._fitting import quaternion_mean as quaternion_mean
 from ._fitting import sixd_to_matrix as sixd_to_matrix
 from ._fitting import slerp as slerp
-from ._kinematics import (
-    angular_acceleration_to_euler_accelerations as angular_acceleration_to_euler_accelerations,
-)
-from ._kinematics import angular_velocity_to_euler_rates as angular_velocity_to_euler_rates
-from ._kinematics import (
-    angular_velocity_to_matrix_derivative as angular_velocity_to_matrix_derivative,
-)
-from ._kinematics import (
-    euler_accelerations_to_angular_acceleration as euler_accelerations_to_angular_acceleration,
-)
-from ._kinematics import euler_rate_matrix as euler_rate_matrix
-from ._kinematics import euler_rates_to_angular_velocity as euler_rates_to_angular_velocity
-from ._kinematics import euler_singularity as euler_singularity
-from ._kinematics import integrate_angular_velocity as integrate_angular_velocity
-from ._kinematics import (
-    integrate_angular_velocity_samples as integrate_angular_velocity_samples,
-)
-from ._kinematics import (
-    matrix_derivative_to_angular_velocity as matrix_derivative_to_angular_velocity,
-)
-from ._kinematics import quaternion_derivative as quaternion_derivative
-from ._kinematics import (
-    quaternion_derivative_to_angular_velocity as quaternion_derivative_to_angular_velocity,
-)
-from ._kinematics import unwrap_euler as unwrap_euler
-from ._kinematics import unwrap_quaternion as unwrap_quaternion
+from ._interpolation import RotationSpline as RotationSpline
+from ._interpolation import Slerp as Slerp
 from ._matrix import matrix_to_quaternion as matrix_to_quaternion
 from ._mrp import mrp_to_quaternion as mrp_to_quaternion
 from ._mrp import quaternion_to_mrp as quaternion_to_mrp
 from ._partition import partition_coordinates as partition_coordinates
+from ._propagation import integrate_angular_velocity as integrate_angular_velocity
+from ._propagation import (
+    integrate_angular_velocity_samples as integrate_angular_velocity_samples,
+)
 from ._quaternion import angle_between as angle_between
 from ._quaternion import quaternion_apply as quaternion_apply
 from ._quaternion import quaternion_conjugate as quaternion_conjugate
@@ -68,11 +48,29 @@ from ._quaternion import quaternion_normalize as quaternion_normalize
 from ._quaternion import quaternion_to_matrix as quaternion_to_matrix
 from ._quaternion import relative_rotation as relative_rotation
 from ._quaternion import rotation_angle as rotation_angle
+from ._rates import (
+    angular_acceleration_to_euler_accelerations as angular_acceleration_to_euler_accelerations,
+)
+from ._rates import angular_velocity_to_euler_rates as angular_velocity_to_euler_rates
+from ._rates import (
+    angular_velocity_to_matrix_derivative as angular_velocity_to_matrix_derivative,
+)
+from ._rates import (
+    euler_accelerations_to_angular_acceleration as euler_accelerations_to_angular_acceleration,
+)
+from ._rates import euler_rate_matrix as euler_rate_matrix
+from ._rates import euler_rates_to_angular_velocity as euler_rates_to_angular_velocity
+from ._rates import euler_singularity as euler_singularity
+from ._rates import (
+    matrix_derivative_to_angular_velocity as matrix_derivative_to_angular_velocity,
+)
+from ._rates import quaternion_derivative as quaternion_derivative
+from ._rates import (
+    quaternion_derivative_to_angular_velocity as quaternion_derivative_to_angular_velocity,
+)
 from ._rigid import RigidTransform as RigidTransform
 from ._rigid import normalize_dual_quaternion as normalize_dual_quaternion
 from ._rotation import Rotation as Rotation
-from ._rotation import RotationSpline as RotationSpline
-from ._rotation import Slerp as Slerp
 from ._rotvec import axis_angle_to_quaternion as axis_angle_to_quaternion
 from ._rotvec import matrix_to_rotvec as matrix_to_rotvec
 from ._rotvec import quaternion_to_axis_angle as quaternion_to_axis_angle
@@ -92,6 +90,8 @@ from ._se3 import so3_left_jacobian_inverse as so3_left_jacobian_inverse
 from ._se3 import so3_right_jacobian as so3_right_jacobian
 from ._se3 import so3_right_jacobian_inverse as so3_right_jacobian_inverse
 from ._se3 import vee as vee
+from ._unwrap import unwrap_euler as unwrap_euler
+from ._unwrap import unwrap_quaternion as unwrap_quaternion
 
 __version__ = "0.1.0"
 

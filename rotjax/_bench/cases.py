@@ -230,7 +230,7 @@ def _rpy(r):
 
 
 def _integrate(method):
-    from .._kinematics import integrate_angular_velocity
+    from .._propagation import integrate_angular_velocity
 
     def f(x):
         return integrate_angular_velocity(x[..., :4], x[..., 4:], 0.01, method=method)
@@ -239,7 +239,7 @@ def _integrate(method):
 
 
 def _integrate_samples(method):
-    from .._kinematics import integrate_angular_velocity_samples
+    from .._propagation import integrate_angular_velocity_samples
 
     def f(x):  # (n, 3) -> STEPS samples of n / STEPS series, from the identity
         omega = x.reshape(STEPS, -1, 3)

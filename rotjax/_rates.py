@@ -1,4 +1,4 @@
-"""Kinematics: angular velocity and the time derivatives of every representation.
+"""Angular velocity and acceleration against the time derivatives of every representation.
 
 Conventions (see the README's Conventions table):
 
@@ -25,15 +25,11 @@ The other three cases map onto it exactly (derived here, checked against autodif
 
 from __future__ import annotations
 
-import operator
-
-import jax
 import jax.numpy as jnp
-import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._euler import is_proper, parse_seq
+from ._euler import parse_seq
 from ._numerics import (
     as_float,
     cast,
@@ -41,21 +37,17 @@ from ._numerics import (
     cross,
     from_scalar_last,
     hat,
-    like_rank,
     matmul,
     matvec,
     max_abs,
     public,
-    select,
     to_scalar_last,
     unit_scale,
     vee,
 )
-from ._quaternion import _conjugate, _multiply, _normalize, _prescaled, _renormalize
-from ._rotvec import _rotvec_to_quat
+from ._quaternion import _conjugate, _multiply
 
 FRAMES = ("body", "world")
-METHODS = ("exponential", "euler", "rk4")
 
 
 def _check_frame(frame) -> None:
@@ -491,194 +483,6 @@ def angular_velocity_to_matrix_derivative(
     return cast((matmul(R, W) if frame == "body" else matmul(W, R)), dt)
 
 
-# --- attitude propagation ----------------------------------------------------------------------
-
-
-def _propagation_args(q, omega, frame, method, methods, name):
-    """Validated `(q, omega, out_dtype)` for the integrators (a bad frame or method raises)."""
-    (q, w), out_dt = as_float(q, omega)
-    check_shape(q, (4,), name)
-    check_shape(w, (3,), "omega")
-    _check_frame(frame)
-    if method not in methods:
-        raise ValueError(f"method must be one of {methods}, got {method!r}")
-    return q, w, out_dt
-
-
-@public
-def integrate_angular_velocity(
-    q: ArrayLike,
-    omega: ArrayLike,
-    dt: ArrayLike,
-    frame: str = "body",
-    method: str = "exponential",
-    scalar_first: bool = False,
-) -> Array:
-    """One step of attitude propagation with the angular velocity held constant over the step.
-
-    Args:
-        q: `(..., 4)` orientation at the start of the step; need not be unit.
-        omega: `(..., 3)` angular velocity in `frame` over the step (zero-order hold, as a
-            gyro sample); broadcasts against `q`.
-        dt: `(...)` step length; broadcasts against `q[..., 0]`. Any sign.
-        frame: `"body"` (gyro axes, `q_next = q * dq`) or `"world"`
-            (`q_next = dq * q`).
-        method:
-
-            * `"exponential"` (default): `dq = exp(omega dt / 2)`, the exact step for a
-              constant `omega`. Its Taylor branch at `omega = 0` makes the gradient there
-              exact.
-            * `"euler"`: `q + dt q'`, renormalised. Because `omega` is constant over the
-              step, the renormalised step turns about the exact axis by `2 atan(|omega| dt / 2)`
-              instead of `|omega| dt`: local error `O(dt^3)`, global `O(dt^2)`.
-            * `"rk4"`: classical Runge-Kutta on `q' = q * (omega, 0) / 2`, renormalised:
-              local error `O(dt^5)`, global `O(dt^4)`.
-        scalar_first: quaternions are `(w, x, y, z)`.
-
-    Returns:
-        `(..., 4)` unit quaternion at the end of the step, in the layout of `q`. No
-            hemisphere is imposed, so a sequence of steps stays continuous.
-
-    Note:
-        The step is a pure function of its arrays, so it scans over a gyro log::
-
-            step = lambda q, w: (integrate_angular_velocity(q, w, dt),) * 2
-            q_end, q_traj = jax.lax.scan(step, q0, omegas)
-
-        Holding each sample makes the result first order in the sample interval, whatever the
-        method: `"rk4"` integrates the held signal accurately, not the motion between the
-        samples. For a log of samples,
-        [`integrate_angular_velocity_samples`][rotjax.integrate_angular_velocity_samples] reads
-        `omega` between them (second or fourth order).
-
-    Examples:
-        ```python
-        import jax
-        import rotjax as rj
-
-        def step(q, _):
-            return rj.integrate_angular_velocity(q, [0.0, 0.0, 1.0], 0.1), None
-
-        q, _ = jax.lax.scan(step, rj.rotvec_to_quaternion([0.0, 0.0, 0.0]), length=10)
-        print(rj.quaternion_to_rotvec(q).round(6))  # 1 rad/s for 1 s
-        # [0. 0. 1.]
-        ```
-    """
-    q, w, out_dt = _propagation_args(q, omega, frame, method, METHODS, "q")
-    h = like_rank(jnp.asarray(dt).astype(q.dtype)[..., None], q)
-    q = _prescaled(to_scalar_last(q, scalar_first))  # q_next is then of order 1 too
-    if method == "exponential":
-        dq = _rotvec_to_quat(w * h)
-        q_next = _multiply(q, dq) if frame == "body" else _multiply(dq, q)
-    elif method == "euler":
-        q_next = q + h * _quat_rate(q, w, frame)
-    else:
-
-        def f(x):
-            return _quat_rate(x, w, frame)
-
-        k1 = f(q)
-        k2 = f(q + h / 2 * k1)
-        k3 = f(q + h / 2 * k2)
-        k4 = f(q + h * k3)
-        q_next = q + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return from_scalar_last(_renormalize(q_next), scalar_first).astype(out_dt)
-
-
-# --- continuous Euler angles -------------------------------------------------------------------
-
-
-@public
-def unwrap_euler(angles: ArrayLike, seq: str, axis: int = 0) -> Array:
-    """Continuous Euler angles from a time series of principal-range ones.
-
-    Args:
-        angles: `(..., T, ..., 3)` Euler angles in radians, in the order of `seq`, e.g. from
-            [`quaternion_to_euler`][rotjax.quaternion_to_euler]; the last axis holds the three
-            angles.
-        seq: axis sequence; see [`euler_rate_matrix`][rotjax.euler_rate_matrix].
-        axis: the time axis (any integer-like value, any axis but the last).
-
-    Returns:
-        Array of the same shape: at each sample, among the two solution sets and all `2 pi`
-            shifts of each angle, the one nearest (sum of squared differences) to the previous
-            output sample. Every output sample describes the same rotation as its input. The first
-            sample is returned unchanged. A sample with a NaN or infinite angle is returned as it
-            is and skipped: the next finite sample is unwrapped against the last finite output.
-
-    Note:
-        The second solution set is `(a0 + pi, pi - a1, a2 + pi)` for Tait-Bryan sequences and
-        `(a0 + pi, -a1, a2 + pi)` for proper Euler sequences (checked against
-        `euler_to_quaternion` in the tests). A middle angle that runs through
-        the edge of its principal range therefore continues smoothly past it. Only the sum or
-        difference of the outer angles is defined at exact gimbal lock; there the choice
-        follows the previous sample, so the output stays continuous if the input sampling
-        resolves the motion (steps well below `pi / 2`). Implemented with `lax.scan` and
-        no data-dependent branches.
-
-    Examples:
-        ```python
-        import jax.numpy as jnp
-        import rotjax as rj
-
-        yaw = jnp.deg2rad(jnp.array([170.0, 179.0, -172.0]))  # crosses +-180 deg
-        angles = jnp.stack([yaw, jnp.zeros(3), jnp.zeros(3)], axis=-1)
-        print(jnp.rad2deg(rj.unwrap_euler(angles, "ZYX")[:, 0]).round(1))
-        # [170. 179. 188.]
-        ```
-    """
-    (a,), dt = as_float(angles)
-    check_shape(a, (3,), "angles")
-    parse_seq(seq)  # a bad seq raises here, before any array work
-    axis = _time_axis(axis, a.ndim, "angles", a.shape)
-    x = jnp.moveaxis(a, axis, 0)
-    if x.shape[0] == 0:
-        return cast(a, dt)
-    two_pi = 2 * np.pi
-    # Second solution set: R_i(a0 + pi) R_j(b) R_k(a2 + pi) = R_i(a0) R_j(a1) R_k(a2) needs
-    # b = pi - a1 when i != k and b = -a1 when i == k (rotating by pi about e_i flips e_j).
-    flip = np.array([1.0, -1.0, 1.0])
-    offset = np.array([np.pi, 0.0 if is_proper(seq) else np.pi, np.pi])
-    flip, offset = like_rank(flip, x[0]), like_rank(offset, x[0])
-
-    def nearest(c, prev):
-        return c + two_pi * jnp.round((prev - c) / two_pi)
-
-    def step(carry, sample):
-        prev, seen = carry
-        # A non-finite sample is returned as it is and leaves the reference untouched: the next
-        # finite sample is unwrapped against the last finite output (or passed through unchanged
-        # if none came before). Double where: `prev` is made finite before the arithmetic.
-        ok = jnp.all(jnp.isfinite(sample), axis=-1, keepdims=True)
-        ref = jnp.where(seen, prev, 0.0)
-        s = jnp.where(ok, sample, 0.0)
-        c1 = nearest(s, ref)
-        c2 = nearest(offset + flip * s, ref)
-        d1 = jnp.sum((c1 - ref) ** 2, axis=-1, keepdims=True)
-        d2 = jnp.sum((c2 - ref) ** 2, axis=-1, keepdims=True)
-        out = jnp.where(seen, jnp.where(d2 < d1, c2, c1), s)
-        out = jnp.where(ok, out, sample)
-        return (jnp.where(ok, out, prev), seen | ok), out
-
-    seen0 = jnp.zeros(x.shape[1:-1] + (1,), dtype=bool)
-    _, y = jax.lax.scan(step, (jnp.zeros_like(x[0]), seen0), x)
-    return cast(jnp.moveaxis(y, 0, axis), dt)
-
-
-def _time_axis(axis, ndim: int, name: str, shape) -> int:
-    """Validate a static time axis (any integer-like value, not the component axis)."""
-    try:
-        ax = operator.index(axis)
-    except TypeError:
-        ax = None
-    if ax is None or isinstance(axis, bool) or not -ndim <= ax < ndim or ax % ndim == ndim - 1:
-        raise ValueError(
-            f"axis must be an integer indexing a time axis of {name} with shape {tuple(shape)} "
-            f"other than the last, got {axis!r}"
-        )
-    return ax % ndim
-
-
 # --- Euler-angle accelerations -----------------------------------------------------------------
 
 
@@ -799,187 +603,3 @@ def angular_acceleration_to_euler_accelerations(
     d = jnp.asarray(damping).astype(a.dtype)
     E = _rate_matrix(a, seq, frame)
     return cast(_inverse_rates(a, al - _rate_derivative_terms(E, r, seq), seq, frame, d), dt)
-
-
-# --- attitude from sampled angular velocity ----------------------------------------------------
-
-SAMPLE_METHODS = ("hold", "trapezoid", "magnus4")
-
-# Gauss-Legendre nodes of the two-point rule on [0, 1] (Magnus 4: Iserles & Norsett 1999).
-_GAUSS = (0.5 - np.sqrt(3.0) / 6.0, 0.5 + np.sqrt(3.0) / 6.0)
-
-
-def _gauss_weights(n_samples: int):
-    """Lagrange weights that interpolate the two Gauss nodes of each step from samples.
-
-    Step `k` (from sample `k` to `k + 1`) uses `p = min(4, n_samples)` consecutive
-    samples starting at `s_k = clip(k - 1, 0, n_samples - p)`: centred (a cubic through
-    `k - 1 .. k + 2`) inside, one-sided at the two ends. Returns the start indices `(T,)`
-    and the weights `(T, 2, p)` in float64.
-    """
-    p = min(4, n_samples)
-    k = np.arange(n_samples - 1)
-    start = np.clip(k - 1, 0, n_samples - p)
-    nodes = (k - start)[:, None] + np.asarray(_GAUSS)[None, :]  # (T, 2), stencil coordinates
-    x = np.arange(p, dtype=np.float64)
-    w = np.ones(nodes.shape + (p,))
-    for j in range(p):
-        for m in range(p):
-            if m != j:
-                w[..., j] *= (nodes - x[m]) / (x[j] - x[m])
-    return start, w
-
-
-def _step_rotvecs(w, h, frame, method):
-    """Rotation vectors `phi_k` of the steps, `q_{k+1} = q_k exp(phi_k)` (body) or
-    `exp(phi_k) q_k` (world); `w` is `(T + 1, ..., 3)`, `h` broadcasts against it."""
-    # Magnus series of q' = q (w, 0) / 2 (body) or (w, 0) q / 2 (world). For two samples
-    # a (earlier) and b (later) the commutator term is the body-frame coning correction
-    # + c h^2 (a x b) (Bortz's phi' = w + phi x w / 2), and its mirror - c h^2 (a x b) in the
-    # world frame, where the composition order flips.
-    sign = 1.0 if frame == "body" else -1.0
-    if method == "hold":
-        return h * w[:-1]
-    if method == "trapezoid":
-        # w linear between samples: exact Magnus terms up to order 2 give c = 1/12.
-        a, b = w[:-1], w[1:]
-        return h * (a + b) / 2 + (sign / 12) * h * h * cross(a, b)
-    start, weights = _gauss_weights(w.shape[0])
-    wts = jnp.asarray(weights, w.dtype).reshape(weights.shape + (1,) * (w.ndim - 1))
-    a = b = jnp.zeros_like(w[:-1])
-    for j in range(weights.shape[-1]):  # one gathered copy of the log per stencil point
-        wj = w[start + j]
-        a = a + wts[:, 0, j] * wj  # w at the first Gauss node
-        b = b + wts[:, 1, j] * wj
-    # Fourth-order Magnus with Gauss nodes: Omega = h/2 (A1 + A2) + sqrt(3)/12 h^2 [A2, A1].
-    return h * (a + b) / 2 + (sign * float(np.sqrt(3.0)) / 12) * h * h * cross(a, b)
-
-
-@public(time_leading=("omega",))
-def integrate_angular_velocity_samples(
-    q0: ArrayLike,
-    omega: ArrayLike,
-    dt: ArrayLike,
-    frame: str = "body",
-    method: str = "magnus4",
-    scalar_first: bool = False,
-) -> Array:
-    """Attitude history from angular-velocity samples (a gyro log) taken at equal intervals.
-
-    Args:
-        q0: `(..., 4)` attitude at the first sample time; need not be unit.
-        omega: `(T + 1, ..., 3)` angular velocity in `frame` sampled at `t0 + k dt`,
-            `k = 0 .. T` (time on axis 0, batch dimensions after it, broadcasting against
-            `q0`), in rad per unit time.
-        dt: sample interval, a scalar or `(...)` broadcasting against the batch; any sign.
-        frame: `"body"` (gyro axes, `q' = q * (omega, 0) / 2`) or `"world"`
-            (`q' = (omega, 0) * q / 2`).
-        method: how `omega` is read between samples:
-
-            * `"hold"`: each sample held over the step that follows it, `q_{k+1} =
-              q_k exp(omega_k dt)` (the last sample is not used). First order on smooth data.
-            * `"trapezoid"`: `omega` linear between samples, with the commutator (coning)
-              term; second order.
-            * `"magnus4"` (default): fourth-order Magnus step with two Gauss nodes, `omega`
-              at the nodes from a cubic through the four nearest samples (one-sided at the
-              ends); fourth order. With fewer than four samples the cubic becomes a polynomial
-              through all of them.
-        scalar_first: quaternions are `(w, x, y, z)`.
-
-    Returns:
-        `(T + 1, ..., 4)` unit quaternions at the sample times, in the layout of `q0`; the
-            first is `q0` normalised. Consecutive outputs are continuous (no hemisphere is
-            imposed).
-
-    Note:
-        Each step is an exact rotation (an exponential map, whose Taylor branch keeps values
-        and gradients exact at `omega = 0`), so the norm does not drift. The steps are
-        composed with `lax.associative_scan`: depth `O(log T)`. The zero `q0` gives NaN;
-        a NaN sample affects the attitudes from the steps that read it onwards.
-
-    Examples:
-        ```python
-        import jax.numpy as jnp
-        import rotjax as rj
-
-        t = jnp.linspace(0.0, 1.0, 11)  # 11 gyro samples, dt = 0.1
-        omega = jnp.stack([jnp.zeros_like(t), jnp.zeros_like(t), 2 * t], axis=-1)
-        q = rj.integrate_angular_velocity_samples([0.0, 0.0, 0.0, 1.0], omega, 0.1)
-        print(q.shape, rj.quaternion_to_rotvec(q[-1]).round(6))  # angle t^2 at t = 1
-        # (11, 4) [0. 0. 1.]
-        ```
-    """
-    q, w, out_dt = _propagation_args(q0, omega, frame, method, SAMPLE_METHODS, "q0")
-    if w.ndim < 2:
-        raise ValueError(f"omega: expected shape (T + 1, ..., 3), got {tuple(w.shape)}")
-    h = jnp.asarray(dt).astype(q.dtype)
-    q = _normalize(to_scalar_last(q, scalar_first))
-    batch = jnp.broadcast_shapes(q.shape[:-1], w.shape[1:-1], h.shape)
-    q = jnp.broadcast_to(q, batch + (4,))
-    w = jnp.broadcast_to(w, w.shape[:1] + batch + (3,))
-    if w.shape[0] == 1:
-        return from_scalar_last(q[None], scalar_first).astype(out_dt)
-    h = jnp.broadcast_to(h, batch)[None, ..., None]
-    dq = _rotvec_to_quat(_step_rotvecs(w, h, frame, method))  # (T, ..., 4)
-    if frame == "body":  # q_k = q0 dq_0 ... dq_{k-1}
-        prods = jax.lax.associative_scan(_multiply, dq, axis=0)
-        qs = _multiply(q[None], prods)
-    else:  # q_k = dq_{k-1} ... dq_0 q0
-        prods = jax.lax.associative_scan(lambda x, y: _multiply(y, x), dq, axis=0)
-        qs = _multiply(prods, q[None])
-    out = jnp.concatenate([q[None], _renormalize(qs)], axis=0)
-    return from_scalar_last(out, scalar_first).astype(out_dt)
-
-
-# --- quaternion sign continuity ----------------------------------------------------------------
-
-
-@public
-def unwrap_quaternion(q: ArrayLike, axis: int = 0, scalar_first: bool = False) -> Array:
-    """Quaternion time series with consecutive samples in the same hemisphere.
-
-    Args:
-        q: `(..., T, ..., 4)` quaternions; need not be unit. The last axis holds the
-            components.
-        axis: the time axis (any integer-like value, any axis but the last).
-        scalar_first: quaternions are `(w, x, y, z)` (the layout is kept).
-
-    Returns:
-        Array of the same shape, each sample `q_k` or `-q_k` (the same rotation), such that
-            `q_k . q_{k+1} >= 0` between consecutive finite samples. The first finite sample
-            keeps its sign. A dot product of exactly 0 keeps the sign.
-
-    Note:
-        Samples with a NaN or infinite component are returned unchanged and skipped: the sign
-        of the next finite sample is chosen against the last finite sample before it, so a bad
-        sample neither flips nor poisons the rest of the series. Implemented with a cumulative
-        maximum (the last finite index) and a cumulative product of signs: no sequential loop.
-
-    Examples:
-        ```python
-        import rotjax as rj
-
-        q = [[0.0, 0.0, 0.6, 0.8], [0.0, 0.0, -0.7, -0.71], [0.0, 0.0, 0.8, 0.6]]
-        print(rj.unwrap_quaternion(q))  # the middle sample flips to the same hemisphere
-        # [[ 0.    0.    0.6   0.8 ]
-        #  [-0.   -0.    0.7   0.71]
-        #  [ 0.    0.    0.8   0.6 ]]
-        ```
-    """
-    (x,), dt = as_float(q)
-    check_shape(x, (4,), "q")
-    axis = _time_axis(axis, x.ndim, "q", x.shape)
-    x = jnp.moveaxis(x, axis, 0)
-    n = x.shape[0]
-    if n == 0:
-        return cast(jnp.moveaxis(x, 0, axis), dt)
-    ok = jnp.all(jnp.isfinite(x), axis=-1)  # (T, ...)
-    idx = jnp.arange(n).reshape((n,) + (1,) * (ok.ndim - 1))
-    last = jax.lax.cummax(jnp.where(ok, idx, -1), axis=0)  # last finite index <= k
-    prev = jnp.concatenate([jnp.full_like(last[:1], -1), last[:-1]], axis=0)  # < k
-    ref = jnp.take_along_axis(x, jnp.maximum(prev, 0)[..., None], axis=0)
-    dot = jnp.sum(jnp.where(ok[..., None], x, 0.0) * jnp.where(prev[..., None] >= 0, ref, 0.0), -1)
-    sign = select(dot < 0, -1.0, 1.0, x.dtype)
-    flips = jnp.cumprod(sign, axis=0)
-    out = jnp.where(ok[..., None], x * flips[..., None], x)  # bad samples as given
-    return cast(jnp.moveaxis(out, 0, axis), dt)
