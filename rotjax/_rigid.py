@@ -29,7 +29,7 @@ from ._numerics import (
     unstack,
 )
 from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix, _turn
-from ._rotation import Rotation, _concrete, _float, _identity_quat, _input, _Sequence
+from ._rotation import Rotation, _Batch, _concrete, _float, _identity_quat, _input
 from ._se3 import exp_parts, homogeneous, log_parts
 
 # --- SE(3) exponential coordinates ------------------------------------------------------
@@ -230,30 +230,8 @@ def _common(*arrays):
     return tuple(a.astype(dt) for a in arrays)
 
 
-def _check_index(indexer, n: int):
-    """scipy's IndexError for host indices out of range (JAX clamps them)."""
-    if isinstance(indexer, (int, np.integer)) and not isinstance(indexer, bool):
-        if not -n <= indexer < n:
-            raise IndexError(f"index {indexer} is out of bounds for axis 0 with size {n}")
-        return indexer
-    if isinstance(indexer, (list, np.ndarray)):
-        a = np.asarray(indexer)
-        if a.dtype.kind in "iu" and a.size and (a.min() < -n or a.max() >= n):
-            raise IndexError(f"index out of bounds for axis 0 with size {n}")
-        if a.dtype == bool and a.ndim >= 1 and a.shape[0] != n:
-            raise IndexError(
-                f"boolean index did not match indexed array along axis 0; size of axis is "
-                f"{n} but size of corresponding boolean axis is {a.shape[0]}"
-            )
-        return a
-    if isinstance(indexer, jax.Array) and not isinstance(indexer, jax.core.Tracer) and n == 0:
-        if jnp.issubdtype(indexer.dtype, jnp.integer) and indexer.size:
-            raise IndexError("cannot take from an empty array")
-    return indexer
-
-
 @jax.tree_util.register_pytree_node_class
-class RigidTransform(_Sequence):
+class RigidTransform(_Batch):
     """Rigid transforms (rotation and translation) in 3 dimensions, scipy's API on JAX arrays.
 
     `T v = R v + t`: a rotation `R` followed by a translation `t`; as a matrix
@@ -298,6 +276,7 @@ class RigidTransform(_Sequence):
     """
 
     __slots__ = ("_quat", "_translation")
+    _LEAVES = ("_quat", "_translation")
     _NOUN = "transform"
 
     def __init__(self, matrix: ArrayLike, normalize: bool = True, copy: bool = True):
@@ -325,32 +304,7 @@ class RigidTransform(_Sequence):
         tf._translation = translation
         return tf
 
-    # --- pytree --------------------------------------------------------------------------
-
-    def tree_flatten(self):
-        return (self._quat, self._translation), None
-
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        return cls._raw(*children)
-
-    def __getstate__(self):
-        return np.asarray(self._quat), np.asarray(self._translation)
-
-    def __setstate__(self, state):
-        self._quat, self._translation = (jnp.asarray(s) for s in state)
-
-    # --- shape ---------------------------------------------------------------------------
-
-    @property
-    def single(self) -> bool:
-        """Whether this is a single transform (no batch axes)."""
-        return self._quat.ndim == 1
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        """The batch shape (`()` for a single transform)."""
-        return tuple(self._quat.shape[:-1])
+    # --- parts -----------------------------------------------------------------------------
 
     @property
     def rotation(self) -> Rotation:
@@ -361,40 +315,6 @@ class RigidTransform(_Sequence):
     def translation(self) -> Array:
         """The translation part, `(..., 3)`."""
         return self._translation
-
-    def _index(self, indexer):
-        """The index of both leaves: ``indexer`` over the batch axes, all of the last axis."""
-        if self.single:
-            raise TypeError("Single transform is not subscriptable.")
-        if not isinstance(indexer, tuple):
-            indexer = (_check_index(indexer, self.shape[0]),)
-        if any(i is Ellipsis for i in indexer):
-            return indexer + (slice(None),)
-        return indexer + (Ellipsis,)
-
-    def __getitem__(self, indexer) -> RigidTransform:
-        """Transforms selected by ``indexer`` over the batch axes (as NumPy indexing)."""
-        idx = self._index(indexer)
-        return RigidTransform._raw(self._quat[idx], self._translation[idx])
-
-    def __setitem__(self, indexer, value: RigidTransform):
-        """Replace the selected transforms by ``value``.
-
-        JAX arrays are immutable: this builds new arrays (``.at[...].set``) and rebinds this
-        object's leaves to them, as ``Rotation.__setitem__`` does. Other references to the old
-        arrays, and pytrees flattened before, keep the old values.
-        """
-        idx = self._index(indexer)
-        if not isinstance(value, RigidTransform):
-            raise TypeError("value must be a RigidTransform object")
-        q, t = self._quat, self._translation
-        self._quat = q.at[idx].set(value._quat.astype(q.dtype))
-        self._translation = t.at[idx].set(value._translation.astype(t.dtype))
-
-    def __repr__(self) -> str:
-        m = repr(np.asarray(self.as_matrix())).splitlines()
-        m[1:] = [" " * 27 + line for line in m[1:]]
-        return "RigidTransform.from_matrix(" + "\n".join(m) + ")"
 
     # --- constructors --------------------------------------------------------------------
 

@@ -152,12 +152,68 @@ def _is_key(x) -> bool:
     return False
 
 
-class _Sequence:
-    """scipy's sequence protocol, shared by `Rotation` and `RigidTransform`: the first batch
-    axis is the sequence; a single element has no length and is not iterable."""
+def _check_index(indexer, n: int):
+    """scipy's IndexError for host indices out of range (JAX clamps them)."""
+    if isinstance(indexer, (int, np.integer)) and not isinstance(indexer, bool):
+        if not -n <= indexer < n:
+            raise IndexError(f"index {indexer} is out of bounds for axis 0 with size {n}")
+        return indexer
+    if isinstance(indexer, (list, np.ndarray)):
+        a = np.asarray(indexer)
+        if a.dtype.kind in "iu" and a.size and (a.min() < -n or a.max() >= n):
+            raise IndexError(f"index out of bounds for axis 0 with size {n}")
+        if a.dtype == bool and a.ndim >= 1 and a.shape[0] != n:
+            raise IndexError(
+                f"boolean index did not match indexed array along axis 0; size of axis is "
+                f"{n} but size of corresponding boolean axis is {a.shape[0]}"
+            )
+        return a
+    if isinstance(indexer, jax.Array) and not isinstance(indexer, jax.core.Tracer) and n == 0:
+        if jnp.issubdtype(indexer.dtype, jnp.integer) and indexer.size:
+            raise IndexError("cannot take from an empty array")
+    return indexer
+
+
+class _Batch:
+    """The batch bookkeeping shared by `Rotation` and `RigidTransform`: the object is its
+    leaves (`_LEAVES`, arrays with the batch axes first and one trailing axis each), the first
+    batch axis is scipy's sequence, and a single element (no batch axes) has no length, is not
+    iterable and not subscriptable. A subclass defines `_LEAVES`, `_NOUN` and `_raw(*leaves)`."""
 
     __slots__ = ()
     _NOUN = "element"
+    _LEAVES: tuple[str, ...] = ()
+
+    def _leaves(self):
+        return tuple(getattr(self, name) for name in self._LEAVES)
+
+    # --- pytree and pickling ---------------------------------------------------------------
+
+    def tree_flatten(self):
+        return self._leaves(), None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls._raw(*children)
+
+    def __getstate__(self):
+        return tuple(np.asarray(x) for x in self._leaves())
+
+    def __setstate__(self, state):
+        for name, x in zip(self._LEAVES, state, strict=True):
+            setattr(self, name, jnp.asarray(x))
+
+    # --- shape and sequence ------------------------------------------------------------------
+
+    @property
+    def single(self) -> bool:
+        """Whether this is a single element (no batch axes)."""
+        return self._leaves()[0].ndim == 1
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The batch shape (`()` for a single element)."""
+        return tuple(self._leaves()[0].shape[:-1])
 
     def __len__(self) -> int:
         """Length of the first batch axis. Raises TypeError for a single element."""
@@ -173,9 +229,44 @@ class _Sequence:
             raise TypeError(f"Single {self._NOUN} is not iterable.")
         return (self[i] for i in range(len(self)))
 
+    def _index(self, indexer):
+        """The index of every leaf: ``indexer`` over the batch axes, all of the last axis."""
+        if self.single:
+            raise TypeError(f"Single {self._NOUN} is not subscriptable.")
+        if not isinstance(indexer, tuple):
+            indexer = (_check_index(indexer, self.shape[0]),)
+        if any(i is Ellipsis for i in indexer):
+            return indexer + (slice(None),)
+        return indexer + (Ellipsis,)
+
+    def __getitem__(self, indexer):
+        """The elements selected by `indexer` over the batch axes (as NumPy indexing)."""
+        idx = self._index(indexer)
+        return self._raw(*(x[idx] for x in self._leaves()))
+
+    def __setitem__(self, indexer, value):
+        """Replace the selected elements by `value` (an object of the same class).
+
+        JAX arrays are immutable: this builds new arrays (`.at[...].set`) and rebinds this
+        object's leaves to them. Other references to the old arrays, and copies of this object
+        made before (e.g. a pytree flattened earlier), are unchanged.
+        """
+        idx = self._index(indexer)
+        if not isinstance(value, type(self)):
+            raise TypeError(f"value must be a {type(self).__name__} object")
+        for name, old, new in zip(self._LEAVES, self._leaves(), value._leaves(), strict=True):
+            old = jnp.asarray(old)
+            setattr(self, name, old.at[idx].set(jnp.asarray(new, old.dtype)))
+
+    def __repr__(self) -> str:
+        head = f"{type(self).__name__}.from_matrix("
+        m = repr(np.asarray(self.as_matrix())).splitlines()
+        m[1:] = [" " * len(head) + line for line in m[1:]]
+        return head + "\n".join(m) + ")"
+
 
 @jax.tree_util.register_pytree_node_class
-class Rotation(_Sequence):
+class Rotation(_Batch):
     """Rotations in 3 dimensions, scipy's `Rotation` API on one JAX array.
 
     A `Rotation` holds a `(..., 4)` quaternion `[x, y, z, w]` (scalar last), the only
@@ -230,6 +321,7 @@ class Rotation(_Sequence):
     # the same for every constructor, method and operator (a scan carry, both branches of a
     # cond), and the value alone decides the result.
     __slots__ = ("_stored",)
+    _LEAVES = ("_stored",)
     _NOUN = "rotation"
     # NumPy's operators defer to ours (``array * r`` is not an object-array product), and ours
     # return NotImplemented for unknown operands, so another class's reflected operator runs.
@@ -254,15 +346,6 @@ class Rotation(_Sequence):
             q = _scalar_last(q, scalar_first)
         self._stored = q
 
-    # --- pytree -------------------------------------------------------------------------
-
-    def tree_flatten(self):
-        return (self._stored,), None
-
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        return cls._raw(children[0])
-
     @classmethod
     def _raw(cls, quat):
         """A rotation holding the quaternion `quat` (any non-zero norm) as it is."""
@@ -275,59 +358,12 @@ class Rotation(_Sequence):
         """The unit quaternion, scalar last."""
         return quaternion_normalize(self._stored)
 
-    def __getstate__(self):
-        return np.asarray(self._stored)
-
-    def __setstate__(self, state):
-        self._stored = jnp.asarray(state)
-
     # --- shape ---------------------------------------------------------------------------
-
-    @property
-    def single(self) -> bool:
-        """Whether this is a single rotation (a 1-D quaternion)."""
-        return self._stored.ndim == 1
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        """The batch shape: the quaternion's shape without its last axis."""
-        return tuple(self._stored.shape[:-1])
 
     @property
     def quat(self) -> Array:
         """The stored `(..., 4)` unit quaternion, scalar last (jax.scipy's field)."""
         return self._quat
-
-    def _index(self, indexer):
-        if self.single:
-            raise TypeError("Single rotation is not subscriptable.")
-        if isinstance(indexer, tuple):
-            if any(i is Ellipsis for i in indexer):
-                return indexer + (slice(None),)
-            return indexer + (Ellipsis,)
-        return (indexer, Ellipsis)
-
-    def __getitem__(self, indexer) -> Rotation:
-        """Rotations selected by `indexer` over the batch axes (as NumPy indexing)."""
-        return Rotation._raw(self._stored[self._index(indexer)])
-
-    def __setitem__(self, indexer, value: Rotation):
-        """Replace the selected rotations by `value`.
-
-        JAX arrays are immutable: this builds a new quaternion array (`.at[...].set`) and
-        rebinds this object's leaf to it. Other references to the old array, and copies of
-        this object made before (e.g. a pytree flattened earlier), are unchanged.
-        """
-        idx = self._index(indexer)
-        if not isinstance(value, Rotation):
-            raise TypeError("value must be a Rotation object")
-        q = jnp.asarray(self._stored)  # each row keeps its own norm: stored as given
-        self._stored = q.at[idx].set(jnp.asarray(value._stored, q.dtype))
-
-    def __repr__(self) -> str:
-        m = repr(np.asarray(self.as_matrix())).splitlines()
-        m[1:] = [" " * 21 + line for line in m[1:]]
-        return "Rotation.from_matrix(" + "\n".join(m) + ")"
 
     # --- constructors --------------------------------------------------------------------
 
