@@ -194,8 +194,8 @@ _TAN_PI_8 = 0.41421356237309503
 def atan2(y, x):
     """`atan2(y, x)` for float32/float64, branch-free; 0 (not NaN) at `x = y = 0`.
 
-    Signed zeros follow IEEE `atan2` except at the origin, which gives 0 like
-    `safe_atan2`.
+    Signed zeros follow IEEE `atan2` except at the origin, which gives 0 with a zero
+    derivative (the minimum-norm subgradient: the function has no limit there).
     """
     size = jnp.dtype(x.dtype).itemsize
     ax, ay = jnp.abs(x), jnp.abs(y)
@@ -235,7 +235,7 @@ def atan2(y, x):
 
 @atan2.defjvp
 def _atan2_jvp(primals, tangents):
-    # The exact derivative, (x dy - y dx) / (x^2 + y^2); 0 at the origin, as safe_atan2.
+    # The exact derivative, (x dy - y dx) / (x^2 + y^2); 0 at the origin.
     # x and y are scaled by a power of two s first (exact), so that x^2 + y^2 cannot underflow:
     # it is s (xs dy - ys dx) / (xs^2 + ys^2), about 1 / |(x, y)| at any scale. The reciprocal
     # by rsqrt (xs^2 + ys^2 is in [1, 8) or 0): the rule then fuses into its consumers' loop.

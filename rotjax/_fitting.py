@@ -22,6 +22,7 @@ from ._eigen import (
     pow2_scale,
     top_eigenvector,
 )
+from ._elementary import atan2
 from ._numerics import (
     FULL,
     as_float,
@@ -32,7 +33,6 @@ from ._numerics import (
     like_rank,
     matmul,
     public,
-    safe_atan2,
     safe_norm,
     to_scalar_last,
     vee,
@@ -180,7 +180,7 @@ def geodesic_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
     c = 0.5 * (jnp.trace(M, axis1=-2, axis2=-1) - 1)
     s = safe_norm(vee(M))
     # atan2 of an infinite sine is a finite pi/2: an infinite component gives NaN instead.
-    return cast(jnp.where(jnp.isfinite(s) & jnp.isfinite(c), safe_atan2(s, c), jnp.nan), dt)
+    return cast(jnp.where(jnp.isfinite(s) & jnp.isfinite(c), atan2(s, c), jnp.nan), dt)
 
 
 @public

@@ -297,12 +297,6 @@ def safe_norm(x, axis=-1):
     return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))  # double where
 
 
-def safe_atan2(y, x):
-    """`atan2` whose gradient is finite (zero) at `y = x = 0`, where it returns 0."""
-    zero = (x == 0) & (y == 0)
-    return jnp.where(zero, 0.0, jnp.arctan2(jnp.where(zero, 0.0, y), jnp.where(zero, 1.0, x)))
-
-
 def cross(a, b):
     """Cross product over the last axis (broadcasting)."""
     a0, a1, a2 = jnp.moveaxis(a, -1, 0)

@@ -15,6 +15,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike, DTypeLike
 
+from ._elementary import rsqrt
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
 from ._numerics import (
@@ -145,7 +146,7 @@ def _normalize_dq(real, dual):
     n2 = jnp.sum(real * real, axis=-1, keepdims=True)
     ident = jnp.zeros_like(real).at[..., 3].set(1)
     real = jnp.where(zero, ident, real)
-    inv = jax.lax.rsqrt(jnp.where(zero, jnp.ones_like(n2), n2))  # double where
+    inv = rsqrt(jnp.where(zero, jnp.ones_like(n2), n2))  # double where; n2 in [1, 4)
     real, dual = real * inv, dual * inv
     return real, dual - jnp.sum(real * dual, axis=-1, keepdims=True) * real
 

@@ -23,12 +23,13 @@ from ._algebra import (
     wahba_sensitivity,
 )
 from ._davenport import davenport_to_quaternion, parse_order, quaternion_to_davenport
+from ._elementary import atan2
 from ._euler import euler_to_quaternion, parse_seq, quaternion_to_euler
 from ._fitting import align_vectors as _align_vectors
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
-from ._numerics import _check_array, _check_static, cross, jit, safe_atan2, to_scalar_last
+from ._numerics import _check_array, _check_static, cross, jit, to_scalar_last
 from ._quaternion import (
     _multiply,
     _prescaled,
@@ -1296,7 +1297,7 @@ def _align(a, b, w):
     apn = ap[None, :]
     sin = jnp.sum(cross(cs, a) * apn, axis=-1)
     cos = jnp.sum(cs * a, axis=-1) - jnp.sum(cs * apn, axis=-1) * jnp.sum(a * apn, axis=-1)
-    phi = safe_atan2(jnp.sum(w_fin * sin), jnp.sum(w_fin * cos))
+    phi = atan2(jnp.sum(w_fin * sin), jnp.sum(w_fin * cos))
     q_fix = quaternion_multiply(rotvec_to_quaternion(phi * ap), q_pri)
     q = jnp.where(jnp.any(inf), q_fix, q_svd)
     q = jnp.where(bad, jnp.nan, q)
