@@ -18,7 +18,6 @@ from ._numerics import (
     max_abs,
     public,
     stack,
-    stack_scaled,
     sum_squares,
 )
 from ._shepperd import column, entries, k4_columns, masks, select_column
@@ -153,7 +152,8 @@ def _markley(R):
     c, sq = select_column(cols, diag)
     s0 = _hemisphere_scale(c, sq)
     v = _k_times(cols, [x * s0 for x in c])
-    return stack_scaled(v, _hemisphere_scale(v, sum_squares(v)))
+    k = _hemisphere_scale(v, sum_squares(v))
+    return stack([x * k for x in v])
 
 
 def _from_matrix(R, method: str):

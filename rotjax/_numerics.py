@@ -200,7 +200,7 @@ def _read(x):
 @_read.defjvp
 def _read_jvp(primals, tangents):
     (x,), (dx,) = primals, tangents
-    return _read(x), tuple(components(dx))
+    return _read(x), tuple(_components(dx))
 
 
 def stack(parts, branches=False):
@@ -264,12 +264,7 @@ def unstack_matrix(R):
     return list(_read(R.reshape(*R.shape[:-2], R.shape[-2] * R.shape[-1])))
 
 
-def stack_scaled(parts, scale):
-    """:func:`stack` of ``parts`` each times one per-rotation ``scale``."""
-    return stack([p * scale for p in parts])
-
-
-def components(x):
+def _components(x):
     """The components of ``x`` (last axis) as per-rotation arrays, read as sums against one-hot
     rows: for a hand-written rule's tangent, whose transpose (reverse mode) then writes each
     cotangent component by a select on the last axis, in one loop that XLA:CPU vectorises

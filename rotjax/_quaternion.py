@@ -26,7 +26,6 @@ from ._numerics import (
     public,
     stack,
     stack_matrix,
-    stack_scaled,
     sum_squares,
     to_scalar_last,
     unit_scale,
@@ -126,7 +125,8 @@ def _normalize(q):
     """`q / |q|` for `q` at any finite scale (`_prescaled` first); NaN for the zero
     quaternion (0/0, on purpose: it is not a rotation) and for a non-finite component."""
     p, _ = _prescaled_parts(q)
-    return stack_scaled(p, rsqrt(sum_squares(p)))
+    r = rsqrt(sum_squares(p))
+    return stack([x * r for x in p])
 
 
 def _renormalize(q):
@@ -135,7 +135,8 @@ def _renormalize(q):
     norm is a sum of four squares: XLA:CPU runs a reduction over the last axis as a loop of its
     own."""
     p = unstack(q)
-    return stack_scaled(p, rsqrt(sum_squares(p)))
+    r = rsqrt(sum_squares(p))
+    return stack([x * r for x in p])
 
 
 def _to_matrix(q):

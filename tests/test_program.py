@@ -141,7 +141,7 @@ def test_loops_are_vectorised(tmp_path):
     """Every loop of every conversion above and of its jit(grad), in both dtypes, computes with
     full-width vector instructions (LLVM code read from XLA's dump, at 2^20 rotations), except
     those listed above. XLA:CPU emits a scalar or narrow loop where a long per-rotation
-    expression sits in one part of a stacked result (see rotjax._numerics.stack_scaled), or
+    expression sits in one part of a stacked result (see rotjax._numerics.stack), or
     where it calls a function it outlined. Such a loop keeps the loop count, bytes and flops
     of the full-width one, so the budgets above do not see it."""
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
