@@ -482,10 +482,10 @@ def public(fun=None, *, static=(), time_leading=()):
     def call(*args, **kwargs):
         try:
             return jitted(*args, **kwargs)
-        except ValueError as err:
-            if "Non-hashable static arguments" not in str(err):
-                raise
-            validated(*args, **kwargs)  # raises the TypeError naming the argument
+        except (TypeError, ValueError):
+            # jax.jit rejects an unhashable static argument before the checks run: run them
+            # (the clear error naming the argument); any other error is raised as it was.
+            validated(*args, **kwargs)
             raise
 
     return call

@@ -29,21 +29,14 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from ._rigid import RigidTransform
 from ._rotation import Rotation
 
 __all__ = ["grad", "rminus", "rplus", "value_and_grad", "zero_tangents"]
 
 
-def _rigid_class():
-    """``RigidTransform``, imported when first needed (``rotjax._rigid`` imports this module's
-    neighbours, not this module)."""
-    from ._rigid import RigidTransform
-
-    return RigidTransform
-
-
 def _is_group(x) -> bool:
-    return isinstance(x, (Rotation, _rigid_class()))
+    return isinstance(x, (Rotation, RigidTransform))
 
 
 def _kind(x) -> str:
@@ -134,7 +127,7 @@ def rplus(x: Any, delta: Any) -> Any:
         if isinstance(leaf, Rotation):
             return leaf * Rotation.from_rotvec(d)
         if _is_group(leaf):
-            return leaf * _rigid_class().from_exp_coords(d)
+            return leaf * RigidTransform.from_exp_coords(d)
         return leaf + d
 
     return _map(plus, x, delta)
