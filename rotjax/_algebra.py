@@ -11,7 +11,6 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike, DTypeLike
 
-from ._fitting import _svd_signed
 from ._numerics import (
     FULL,
     _check_static,
@@ -20,6 +19,7 @@ from ._numerics import (
     check_shape,
     from_scalar_last,
     like_rank,
+    matmul,
     public,
     to_scalar_last,
 )
@@ -32,6 +32,17 @@ def _canonical(q):
     x, y, z, w = jnp.moveaxis(q, -1, 0)
     lead = jnp.where(w != 0, w, jnp.where(x != 0, x, jnp.where(y != 0, y, z)))
     return jnp.where((lead < 0)[..., None], -q, q)
+
+
+def _svd_signed(M):
+    """SVD `M = U diag(s) V^T` with the sign of `det` moved into `U[:, 2]` and `s[2]`.
+
+    Then `U @ V^T` is in SO(3) and `s[2]` is negative when `det M < 0`.
+    """
+    U, s, Vt = jnp.linalg.svd(M)
+    d = jnp.sign(jnp.linalg.det(matmul(U, Vt)))  # exactly +-1 up to rounding: U, V are orthogonal
+    flip = jnp.stack([jnp.ones_like(d), jnp.ones_like(d), d], axis=-1)
+    return U * flip[..., None, :], s * flip, Vt
 
 
 @public

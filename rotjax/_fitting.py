@@ -119,17 +119,6 @@ def _mT(x):
     return jnp.swapaxes(x, -1, -2)
 
 
-def _svd_signed(M):
-    """SVD `M = U diag(s) V^T` with the sign of `det` moved into `U[:, 2]` and `s[2]`.
-
-    Then `U @ V^T` is in SO(3) and `s[2]` is negative when `det M < 0`.
-    """
-    U, s, Vt = jnp.linalg.svd(M)
-    d = jnp.sign(jnp.linalg.det(matmul(U, Vt)))  # exactly +-1 up to rounding: U, V are orthogonal
-    flip = jnp.stack([jnp.ones_like(d), jnp.ones_like(d), d], axis=-1)
-    return U * flip[..., None, :], s * flip, Vt
-
-
 # --- losses --------------------------------------------------------------------------------
 
 
