@@ -26,6 +26,7 @@ from ._elementary import atan2
 from ._numerics import (
     FULL,
     as_float,
+    broadcast_batch,
     cast,
     check_shape,
     cross,
@@ -77,11 +78,9 @@ def _unrolled(x, y):
 
 
 def _broadcast_batch(x, y, fx, fy):
-    """`x`, `y` and their factors broadcast to one batch shape."""
-    batch = jnp.broadcast_shapes(x.shape[:-2], y.shape[:-2])
-    x, y = jnp.broadcast_to(x, batch + x.shape[-2:]), jnp.broadcast_to(y, batch + y.shape[-2:])
-    fx, fy = ([jnp.broadcast_to(f, batch) for f in fs] for fs in (fx, fy))
-    return x, y, fx, fy
+    """`x`, `y` (`(..., n, k)`) and their per-matrix factors broadcast to one batch shape."""
+    x, y, *f = broadcast_batch(x, y, *fx, *fy, trailing=(2, 2) + (0,) * (len(fx) + len(fy)))
+    return x, y, f[: len(fx)], f[len(fx) :]
 
 
 def _scaled_pair(x, y, fx, fy):

@@ -330,6 +330,24 @@ _TRAILING_RANK = {
 }
 
 
+def broadcast_batch(*arrays, trailing=1, what="Cannot broadcast the batch shapes"):
+    """The arrays broadcast explicitly to one batch shape (all but each array's `trailing`
+    core axes: an int for all, or one per array), so that rank promotion is never implicit;
+    an array that has it already is returned as it is. `ValueError` (`what` and the shapes)
+    where the batch shapes do not broadcast."""
+    if isinstance(trailing, int):
+        trailing = (trailing,) * len(arrays)
+    lead = [a.shape[: a.ndim - t] for a, t in zip(arrays, trailing, strict=True)]
+    try:
+        shape = np.broadcast_shapes(*lead)
+    except ValueError:
+        raise ValueError(f"{what} {', '.join(map(str, lead))}") from None
+    return tuple(
+        a if s == shape else jnp.broadcast_to(a, shape + a.shape[a.ndim - t :])
+        for a, s, t in zip(arrays, lead, trailing, strict=True)
+    )
+
+
 def _broadcast_batches(arrays: dict) -> None:
     """Check that the batch shapes of the array arguments in `arrays` (name -> array, updated
     in place) broadcast, else raise `ValueError` naming both arguments and shapes (rather

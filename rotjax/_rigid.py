@@ -19,6 +19,7 @@ from ._elementary import rsqrt
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
 from ._numerics import (
+    broadcast_batch,
     cross,
     jit,
     matvec,
@@ -58,14 +59,6 @@ def _log(q, t):
 # --- jitted kernels ----------------------------------------------------------------------
 
 
-def _bcast(*arrays):
-    """Broadcast the batch shapes (all but the last axis) explicitly."""
-    shape = np.broadcast_shapes(*(a.shape[:-1] for a in arrays))
-    return tuple(
-        a if a.shape[:-1] == shape else jnp.broadcast_to(a, shape + a.shape[-1:]) for a in arrays
-    )
-
-
 @jit(static_argnames="normalize")
 def _from_matrix(m, normalize):
     # Rotation part: the nearest rotation (Frobenius norm), as Rotation.from_matrix; a 3x3
@@ -94,7 +87,7 @@ def _as_matrix(q, t):
 
 @jit
 def _compose(q1, t1, q2, t2):
-    q1, t1, q2, t2 = _bcast(q1, t1, q2, t2)
+    q1, t1, q2, t2 = broadcast_batch(q1, t1, q2, t2)
     return _renormalize(_multiply(q1, q2)), t1 + _rotate(q1, t2)
 
 
@@ -112,9 +105,9 @@ def _apply(q, t, v, inverse):
     if np.prod(q.shape[:-1]) < np.prod(v.shape[:-1]):
         # Fewer transforms than vectors: each matrix once, then 9 multiply-adds a vector.
         r = _to_matrix(q)
-        r, t, v = jnp.broadcast_to(r, batch + (3, 3)), *_bcast(t, v)
+        r, t, v = jnp.broadcast_to(r, batch + (3, 3)), *broadcast_batch(t, v)
         return matvec(r, v) + t
-    q, t, v = _bcast(q, t, v)
+    q, t, v = broadcast_batch(q, t, v)
     return _rotate(q, v) + t
 
 
@@ -430,7 +423,7 @@ class RigidTransform(_Batch):
         _check_last(t, 3, "translation")
         q, t = _common(rotation.as_quat(), t)
         try:
-            q, t = _bcast(q, t)
+            q, t = broadcast_batch(q, t)
         except ValueError:
             raise ValueError(
                 f"Cannot broadcast {rotation.shape} rotations to {t.shape[:-1]} translations."

@@ -29,7 +29,7 @@ from ._fitting import align_vectors as _align_vectors
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
-from ._numerics import _check_array, _check_static, cross, jit, to_scalar_last
+from ._numerics import _check_array, _check_static, broadcast_batch, cross, jit, to_scalar_last
 from ._quaternion import (
     _multiply,
     _prescaled,
@@ -82,24 +82,6 @@ def _input(x):
     return host.astype(jax.dtypes.canonicalize_dtype(host.dtype), copy=False)
 
 
-def _broadcast(*arrays, trailing, what="Cannot broadcast the batch shapes"):
-    """Broadcast the leading (batch) shapes explicitly, so that rank promotion is never
-    implicit; `trailing` gives each array's core rank."""
-    try:
-        shape = np.broadcast_shapes(
-            *(a.shape[: a.ndim - t] for a, t in zip(arrays, trailing, strict=True))
-        )
-    except ValueError:
-        shapes = ", ".join(
-            str(a.shape[: a.ndim - t]) for a, t in zip(arrays, trailing, strict=True)
-        )
-        raise ValueError(f"{what} {shapes}") from None
-    return tuple(
-        a if a.shape[: a.ndim - t] == shape else jnp.broadcast_to(a, shape + a.shape[a.ndim - t :])
-        for a, t in zip(arrays, trailing, strict=True)
-    )
-
-
 @jit
 def _from_matrix_checked(matrix):
     # scipy raises for det <= 0; a traced function cannot, so those rotations are NaN.
@@ -117,7 +99,7 @@ def _scalar_last(q, scalar_first):
 def _compose(p, q):
     # The stored quaternions need not be unit: the product of the prescaled ones is of order
     # 1, and normalising it gives the unit quaternion of the composition.
-    p, q = _broadcast(p, q, trailing=(1, 1))
+    p, q = broadcast_batch(p, q, trailing=(1, 1))
     return _renormalize(_multiply(_prescaled(p), _prescaled(q)))
 
 
@@ -125,7 +107,7 @@ def _compose(p, q):
 def _apply(q, v, inverse):
     if inverse:
         q = quaternion_conjugate(q)
-    return quaternion_apply(*_broadcast(q, v, trailing=(1, 1)))
+    return quaternion_apply(*broadcast_batch(q, v, trailing=(1, 1)))
 
 
 def _identity_quat(shape, dtype):
@@ -1163,7 +1145,7 @@ class Rotation(_Batch):
                 )
         elif degrees:
             atol = np.deg2rad(atol)
-        p, q = _broadcast(
+        p, q = broadcast_batch(
             self._quat,
             other._quat,
             trailing=(1, 1),
