@@ -25,7 +25,7 @@ from ._shepperd import column, entries, k4_columns, masks, select_column
 METHODS = ("shepperd", "markley", "optimal")
 
 
-def _prescaled(R, split=False):
+def _prescaled_matrix(R, split=False):
     """The nine entries of ``R`` (row by row) times a power of two ``s`` that brings the largest
     into ``[1, 2)`` (exact), so that no product below overflows or
     underflows; their squared Frobenius norm; whether ``R`` is a candidate rotation (not zero,
@@ -58,7 +58,7 @@ def _homogeneous_k(R, split=False):
     is NaN for a zero or non-finite ``R``, and so is every column
     :func:`rotjax._shepperd.select_column` returns (the NaN is put into the scale, not into a
     copy of ``R``)."""
-    r, f2, ok, s = _prescaled(R, split)
+    r, f2, ok, s = _prescaled_matrix(R, split)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
     y = rsqrt(h)
     cols, diag = k4_columns(r, jnp.where(ok, h * y, jnp.nan))

@@ -78,7 +78,7 @@ def _reduce(seq: str, frame: str):
     return (axes[::-1] if reverse else axes), world, reverse
 
 
-def _prep_angles(a, negate: bool, reverse: bool):
+def _rate_angles(a, negate: bool, reverse: bool):
     if reverse:
         a = a[..., ::-1]
     return -a if negate else a
@@ -134,7 +134,7 @@ def _body_rate_matrix(axes, a):
 
 def _rate_matrix(a, seq, frame):
     axes, negate, reverse = _reduce(seq, frame)
-    E = _body_rate_matrix(axes, _prep_angles(a, negate, reverse))
+    E = _body_rate_matrix(axes, _rate_angles(a, negate, reverse))
     return E[..., ::-1] if reverse else E
 
 
@@ -148,7 +148,7 @@ def _inverse_rates(a, omega, seq, frame, damping):
     at least `2 d^2` everywhere.
     """
     axes, negate, reverse = _reduce(seq, frame)
-    a = _prep_angles(a, negate, reverse)
+    a = _rate_angles(a, negate, reverse)
     i, j, k = axes
     h, g, m, s = _middle_terms(axes, a[..., 1])
     v = _rotate_k_transposed(k, -a[..., 2], list(jnp.moveaxis(omega, -1, 0)))  # R_k(a2) omega

@@ -46,13 +46,13 @@ def _rotate(q, v):
     return stack([a + d for a, d in zip(v, _turn(unstack(q), v), strict=True)])
 
 
-def _exp(xi):
+def _pose_exp(xi):
     xi = unstack(xi)
     q, t = exp_parts(xi[:3], xi[3:])
     return stack(q), stack(t)
 
 
-def _log(q, t):
+def _pose_log(q, t):
     return stack(log_parts(unstack(q), unstack(t)))
 
 
@@ -60,7 +60,7 @@ def _log(q, t):
 
 
 @jit(static_argnames="normalize")
-def _from_matrix(m, normalize):
+def _pose_from_matrix(m, normalize):
     # Rotation part: the nearest rotation (Frobenius norm), as Rotation.from_matrix; a 3x3
     # block with det <= 0 or a last row other than [0, 0, 0, 1] gives NaN (scipy raises, or
     # gives NaN for lazy arrays).
@@ -86,22 +86,22 @@ def _as_matrix(q, t):
 
 
 @jit
-def _compose(q1, t1, q2, t2):
+def _pose_compose(q1, t1, q2, t2):
     q1, t1, q2, t2 = broadcast_batch(q1, t1, q2, t2)
     return _renormalize(_multiply(q1, q2)), t1 + _rotate(q1, t2)
 
 
 @jit
-def _inv(q, t):
+def _pose_inv(q, t):
     qc = _conjugate(q)
     return qc, -_rotate(qc, t)
 
 
 @jit(static_argnames="inverse")
-def _apply(q, t, v, inverse):
+def _pose_apply(q, t, v, inverse):
     batch = np.broadcast_shapes(q.shape[:-1], v.shape[:-1])
     if inverse:
-        q, t = _inv(q, t)
+        q, t = _pose_inv(q, t)
     if np.prod(q.shape[:-1]) < np.prod(v.shape[:-1]):
         # Fewer transforms than vectors: each matrix once, then 9 multiply-adds a vector.
         r = _to_matrix(q)
@@ -113,18 +113,18 @@ def _apply(q, t, v, inverse):
 
 @jit
 def _from_exp_coords(xi):
-    return _exp(xi)
+    return _pose_exp(xi)
 
 
 @jit
 def _as_exp_coords(q, t):
-    return _log(q, t)
+    return _pose_log(q, t)
 
 
 @jit
 def _pow(q, t, n):
-    xi = _log(q, t)
-    return _exp(n[..., None] * xi)
+    xi = _pose_log(q, t)
+    return _pose_exp(n[..., None] * xi)
 
 
 def _normalize_dq(real, dual):
@@ -288,7 +288,7 @@ class RigidTransform(_Batch):
                 )
             if m.size and np.any(np.linalg.det(m[..., :3, :3]) <= 0):
                 raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
-        self._quat, self._translation = _from_matrix(m, normalize=bool(normalize))
+        self._quat, self._translation = _pose_from_matrix(m, normalize=bool(normalize))
 
     @classmethod
     def _raw(cls, quat, translation) -> RigidTransform:
@@ -659,7 +659,7 @@ class RigidTransform(_Batch):
                 "transforms in second object."
             ) from None
         q1, t1, q2, t2 = _common(self._quat, self._translation, other._quat, other._translation)
-        return RigidTransform._raw(*_compose(q1, t1, q2, t2))
+        return RigidTransform._raw(*_pose_compose(q1, t1, q2, t2))
 
     def __mul__(self, other: RigidTransform | Rotation) -> RigidTransform:
         """Composition `self * other`: `other` applied first; batch shapes broadcast.
@@ -743,7 +743,7 @@ class RigidTransform(_Batch):
             # [-1. -2. -3.]
             ```
         """
-        return RigidTransform._raw(*_inv(self._quat, self._translation))
+        return RigidTransform._raw(*_pose_inv(self._quat, self._translation))
 
     def apply(self, vector: ArrayLike, inverse: bool = False) -> Array:
         """Transform vectors: `R v + t` (`R^T (v - t)` with `inverse`).
@@ -776,7 +776,7 @@ class RigidTransform(_Batch):
                 f"operands could not be broadcast together: {self.shape} transforms and "
                 f"{v.shape[:-1]} vectors"
             ) from None
-        return _apply(self._quat, self._translation, v, inverse=bool(inverse))
+        return _pose_apply(self._quat, self._translation, v, inverse=bool(inverse))
 
     def mean(
         self, weights: ArrayLike | None = None, axis: int | tuple[int, ...] | None = None

@@ -96,7 +96,7 @@ def _scalar_last(q, scalar_first):
 
 
 @jit
-def _compose(p, q):
+def _rotation_compose(p, q):
     # The stored quaternions need not be unit: the product of the prescaled ones is of order
     # 1, and normalising it gives the unit quaternion of the composition.
     p, q = broadcast_batch(p, q, trailing=(1, 1))
@@ -104,7 +104,7 @@ def _compose(p, q):
 
 
 @jit(static_argnames="inverse")
-def _apply(q, v, inverse):
+def _rotation_apply(q, v, inverse):
     if inverse:
         q = quaternion_conjugate(q)
     return quaternion_apply(*broadcast_batch(q, v, trailing=(1, 1)))
@@ -813,7 +813,7 @@ class Rotation(_Batch):
             host = _concrete(x)
             if host is not None and not np.any(np.atleast_2d(host)[primary]):
                 raise ValueError("Cannot align zero length primary vectors")
-        q, rssd = _align(a2, b2, w)
+        q, rssd = _align_primary(a2, b2, w)
         rot = Rotation._raw(q)
         if return_sensitivity:
             return rot, rssd, wahba_sensitivity(a2, b2, w)
@@ -1009,7 +1009,7 @@ class Rotation(_Batch):
                 f"Cannot broadcast {np_shapes[0]} rotations in first to {np_shapes[1]} "
                 "rotations in second object."
             ) from None
-        return Rotation._raw(_compose(self._stored, other._stored))
+        return Rotation._raw(_rotation_compose(self._stored, other._stored))
 
     def __pow__(self, n: ArrayLike, modulus: None = None) -> Rotation:
         """Fractional power: `n` times the rotation angle about the same axis.
@@ -1091,7 +1091,7 @@ class Rotation(_Batch):
             raise ValueError(
                 f"Cannot broadcast {self.shape} rotations to {v.shape[:-1]} vectors."
             ) from None
-        return _apply(self._stored, v, inverse=inverse)
+        return _rotation_apply(self._stored, v, inverse=inverse)
 
     def magnitude(self) -> Array:
         """Rotation angles in `[0, pi]`.
@@ -1251,7 +1251,7 @@ class Rotation(_Batch):
 
 
 @jit
-def _align(a, b, w):
+def _align_primary(a, b, w):
     """`align_vectors` with scipy's infinite-weight rule; `(N, 3)`, `(N, 3)`, `(N,)`."""
     n = a.shape[0]
     inf = jnp.isinf(w) | (n == 1)
