@@ -104,8 +104,7 @@ def _hypot(u, v):
     Written on the two scalars rather than as `safe_norm` of a stacked pair: XLA:CPU turns
     that reduction into separate loops.
     """
-    s, inv = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
-    u, v = u * s, v * s
+    u, v, _, inv = scaled_pair(u, v)
     sq = u * u + v * v
     zero = sq == 0
     return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq))) * inv

@@ -68,8 +68,8 @@ def _sum_outer(x, y, fx, fy):
     `einsum`. The derivative (`_outer_tangent`) is written so that its transpose, the
     reverse mode, is elementwise too."""
     if not _unrolled(x, y):
-        return _einsum_outer(*_scaled_pair(x, y, fx, fy))
-    xs, ys = _scaled_pair(*_broadcast_batch(x, y, fx, fy))
+        return _einsum_outer(*_scaled_operands(x, y, fx, fy))
+    xs, ys = _scaled_operands(*_broadcast_batch(x, y, fx, fy))
     return sum(xs[..., k, :, None] * ys[..., k, None, :] for k in range(xs.shape[-2]))
 
 
@@ -83,7 +83,7 @@ def _broadcast_batch(x, y, fx, fy):
     return x, y, f[: len(fx)], f[len(fx) :]
 
 
-def _scaled_pair(x, y, fx, fy):
+def _scaled_operands(x, y, fx, fy):
     return (_scaled(v, [f[..., None, None] for f in fs]) for v, fs in ((x, fx), (y, fy)))
 
 
@@ -106,11 +106,11 @@ def _sum_outer_jvp(primals, tangents):
     (x, y, fx, fy), (dx, dy, _, _) = primals, tangents  # the factors are constants
     out = _sum_outer(x, y, fx, fy)
     if not _unrolled(x, y):
-        (xs, ys), (dxs, dys) = _scaled_pair(x, y, fx, fy), _scaled_pair(dx, dy, fx, fy)
+        (xs, ys), (dxs, dys) = _scaled_operands(x, y, fx, fy), _scaled_operands(dx, dy, fx, fy)
         return out, _einsum_outer(dxs, ys) + _einsum_outer(xs, dys)
     x, y, fx, fy = _broadcast_batch(x, y, fx, fy)
     dx, dy = jnp.broadcast_to(dx, x.shape), jnp.broadcast_to(dy, y.shape)
-    (xs, ys), (dxs, dys) = _scaled_pair(x, y, fx, fy), _scaled_pair(dx, dy, fx, fy)
+    (xs, ys), (dxs, dys) = _scaled_operands(x, y, fx, fy), _scaled_operands(dx, dy, fx, fy)
     return out, _outer_tangent(xs, ys, dxs, dys)
 
 
