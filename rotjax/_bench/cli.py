@@ -65,11 +65,12 @@ def _report(argv) -> int:
     args = p.parse_args(argv)
     readme = args.readme if not args.suffix else None  # the README shows the main run only
     stale = report.generate(args.json, args.out, readme, args.suffix, check=args.check)
-    if not args.suffix:  # the pipelines' table, from their own file beside the main run's
-        from . import pipelines
+    if not args.suffix:  # the pipelines' and compile times' tables, from their own files
+        from . import compile_time, pipelines
 
-        pipes = str(Path(args.json).with_name(Path(pipelines.DEFAULT_JSON).name))
-        stale += pipelines.generate(pipes, args.out, check=args.check)
+        for mod in (pipelines, compile_time):
+            other = str(Path(args.json).with_name(Path(mod.DEFAULT_JSON).name))
+            stale += mod.generate(other, args.out, check=args.check)
     for path in stale:
         print(f"{'out of date' if args.check else 'wrote'}: {path}", file=sys.stderr)
     return 1 if args.check and stale else 0
@@ -130,11 +131,16 @@ def main(argv: list[str] | None = None) -> int:
         from . import pipelines
 
         return pipelines.main(argv[1:])
+    if argv and argv[0] == "compile":
+        from . import compile_time
+
+        return compile_time.main(argv[1:])
     p = argparse.ArgumentParser(
         prog="python -m rotjax bench",
         description=RUN_HELP,
         epilog="python -m rotjax bench report --help: regenerate the docs from a JSON file. "
-        "python -m rotjax bench pipelines --help: the pipelines' benchmark.",
+        "python -m rotjax bench pipelines --help: the pipelines' benchmark. "
+        "python -m rotjax bench compile --help: trace, lowering and compile times.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--quick", action="store_true", help="small batch and subsets (CI)")
