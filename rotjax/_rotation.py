@@ -33,7 +33,6 @@ from ._numerics import _check_array, _check_static, broadcast_batch, cross, jit,
 from ._quaternion import (
     _multiply,
     _prescaled,
-    _renormalize,
     angle_between,
     quaternion_apply,
     quaternion_conjugate,
@@ -97,10 +96,11 @@ def _scalar_last(q, scalar_first):
 
 @jit
 def _rotation_compose(p, q):
-    # The stored quaternions need not be unit: the product of the prescaled ones is of order
-    # 1, and normalising it gives the unit quaternion of the composition.
+    # The stored quaternions need not be unit, nor is their product: the product of the
+    # prescaled ones (exact powers of two) has a norm of order 1, which no reader depends on
+    # (each normalises, or is homogeneous), so it is stored as it is.
     p, q = broadcast_batch(p, q, trailing=(1, 1))
-    return _renormalize(_multiply(_prescaled(p), _prescaled(q)))
+    return _multiply(_prescaled(p), _prescaled(q))
 
 
 @jit(static_argnames="inverse")
