@@ -143,6 +143,8 @@ def _check_index(indexer, n: int):
         return indexer
     if isinstance(indexer, (list, np.ndarray)):
         a = np.asarray(indexer)
+        if a.size == 0 and a.dtype.kind == "f":  # [] selects nothing (NumPy reads it as float)
+            a = a.astype(np.intp)
         if a.dtype.kind in "iu" and a.size and (a.min() < -n or a.max() >= n):
             raise IndexError(f"index out of bounds for axis 0 with size {n}")
         if a.dtype == bool and a.ndim >= 1 and a.shape[0] != n:
