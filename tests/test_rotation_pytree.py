@@ -99,8 +99,10 @@ def test_scan_carry_from_any_constructor(start):
         ref = ref * SR.from_rotvec(w)
     np.testing.assert_allclose(final.as_matrix(), ref.as_matrix(), atol=1e-13)
     np.testing.assert_allclose(mags[-1], ref.magnitude(), atol=1e-13)
-    # Unit after every step, whatever the norm of the start.
-    np.testing.assert_allclose(np.linalg.norm(final._stored), 1, atol=1e-14)
+    # Of order 1 after every step, whatever the norm of the start: a product is formed from
+    # the prescaled factors (largest component in [0.5, 2), the step's unit), so its norm lies
+    # in [0.5, 4) and cannot drift towards overflow or underflow over a long loop.
+    assert 0.5 <= np.linalg.norm(final._stored) < 4
 
 
 def test_scan_carry_under_jit_with_float32():
