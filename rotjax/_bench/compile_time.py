@@ -111,8 +111,9 @@ def child(group, name, contender, dtype) -> dict:
     return row
 
 
-def measure(dtypes=("float32", "float64"), only=None, log=print) -> list[dict]:
-    """Every target, each in a new process (``SCIPY_ARRAY_API=1``, no compilation cache)."""
+def measure(dtypes=("float32", "float64"), only=None, log=print, save=None) -> list[dict]:
+    """Every target, each in a new process (``SCIPY_ARRAY_API=1``, no compilation cache);
+    ``save(rows)`` after each."""
     from .cases import peers
 
     env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
@@ -128,6 +129,8 @@ def measure(dtypes=("float32", "float64"), only=None, log=print) -> list[dict]:
                 log(f"[compile] {name} {contender} {dt}: failed\n{done.stderr[-800:]}")
                 continue
             rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
+            if save is not None:
+                save(rows)
             log(f"[compile {i + 1}/{len(todo)}] {name} {contender} {dt}")
     return rows
 
@@ -234,8 +237,12 @@ def main(argv) -> int:
     if args.child:
         print(json.dumps(child(*json.loads(args.child))))
         return 0
-    rows = measure(tuple(args.dtypes.split(",")), args.only, log=lambda s: print(s, flush=True))
-    doc = {"meta": _meta(), "rows": rows}
-    Path(args.json).write_text(json.dumps(doc, indent=1) + "\n")
-    print(markdown(doc))
+    meta = _meta()
+
+    def save(rows):  # after each program: an interrupted run keeps what it measured
+        Path(args.json).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
+
+    rows = measure(tuple(args.dtypes.split(",")), args.only, lambda s: print(s, flush=True), save)
+    save(rows)
+    print(markdown({"meta": meta, "rows": rows}))
     return 0
