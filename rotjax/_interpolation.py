@@ -14,9 +14,9 @@ from jax.typing import ArrayLike
 
 from ._numerics import jit, matvec
 from ._quaternion import quaternion_conjugate, quaternion_multiply
-from ._rates import quaternion_derivative_to_angular_velocity
 from ._rotation import Rotation, _concrete, _float
 from ._rotvec import quaternion_to_rotvec, rotvec_to_quaternion
+from ._se3 import so3_right_jacobian, so3_right_jacobian_inverse
 
 
 def _keyframe_times(times, rotations, dim_msg, order_msg):
@@ -168,18 +168,13 @@ def _slerp_eval(times, timedelta, quat, rotvecs, t):
 #       = 6 (r_i / h_i^2 + r_i+1 / h_i+1^2) - N(r_i, A(r_i) w_i+1),
 # with N the part of the angular acceleration quadratic in phi', is solved by fixed-point
 # iteration on N (scipy's RotationSpline; end rates w_0 = r_0 / h_0 and w_n = r_n-1 / h_n-1).
-# B and N come from differentiating rotvec_to_quaternion and the body angular velocity.
+# B is the right Jacobian of the SO(3) exponential, body_rate = Jr(phi) phi' (Barfoot 2017,
+# Sec. 7.1.5), A its inverse, and N(phi, phi') = (d Jr(phi)[phi']) phi', both closed forms.
 
 
 def _body_rate(phi, phi_dot):
-    """Body angular velocity of `exp(phi)` moving at `phi_dot`."""
-    q, dq = jax.jvp(rotvec_to_quaternion, (phi,), (phi_dot,))
-    return quaternion_derivative_to_angular_velocity(q, dq, frame="body")
-
-
-def _rate_jacobian(phi):
-    """`B(phi)`: `body_rate = B(phi) @ phi_dot`; `(3,)` to `(3, 3)`."""
-    return jax.jacfwd(lambda v: _body_rate(phi, v))(jnp.zeros_like(phi))
+    """Body angular velocity of `exp(phi)` moving at `phi_dot`: `Jr(phi) phi_dot`."""
+    return matvec(so3_right_jacobian(phi), phi_dot)
 
 
 def _quadratic_term(phi, phi_dot):
@@ -200,8 +195,7 @@ def _spline_coefficients(times, quat):
     r = jnp.where(same, r - jax.lax.stop_gradient(r), r)
     n = r.shape[0]  # segments
     w_first, w_last = r[0] / h[0], r[-1] / h[-1]
-    B = jax.vmap(_rate_jacobian)(r)
-    A = jnp.linalg.inv(B)
+    B, A = so3_right_jacobian(r), so3_right_jacobian_inverse(r)
     if n == 1:
         w = jnp.stack([w_first, w_last])
     else:
@@ -222,7 +216,7 @@ def _spline_coefficients(times, quat):
         def step(_, w_int):
             w_end = jnp.concatenate([w_int, w_last[None]])
             rdot = matvec(A, w_end)
-            rhs = b0 - jax.vmap(_quadratic_term)(r[:-1], rdot[:-1])
+            rhs = b0 - _quadratic_term(r[:-1], rdot[:-1])
             return jnp.linalg.solve(M, rhs.reshape(-1)).reshape(m, 3)
 
         w_int = jax.lax.fori_loop(0, _SPLINE_ITERATIONS, step, w_int)
