@@ -84,10 +84,11 @@ def test_q_method_units():
 
 
 def test_bad_input_gives_nan():
-    x = jnp.zeros((2, 9)).at[0, 4].set(jnp.inf)
+    x = np.zeros((2, 9))
+    x[0, 4] = np.inf
     assert np.isnan(rj.nined_to_matrix(x)).all()  # inf in [0], the zero matrix in [1]
-    assert np.isnan(rj.align_vectors(jnp.ones((3, 3)), jnp.ones((3, 3)), jnp.zeros(3))).all()
-    assert np.isnan(rj.quaternion_mean(jnp.ones((3, 4)), jnp.zeros(3))).all()
+    assert np.isnan(rj.align_vectors(np.ones((3, 3)), np.ones((3, 3)), np.zeros(3))).all()
+    assert np.isnan(rj.quaternion_mean(np.ones((3, 4)), np.zeros(3))).all()
     # in a batch run in chunks, the NaN stays in its own element
     chunk = _CHUNK[np.dtype(np.float64)]
     B = np.broadcast_to(np.eye(3), (2 * chunk + 3, 3, 3)).copy()
@@ -101,35 +102,49 @@ def test_bad_input_gives_nan():
         out = np.asarray(jax.jit(f)(jnp.asarray(B))).reshape(len(B), -1)
         assert np.isnan(out[bad]).all() and np.isfinite(out[~bad]).all()
     with pytest.raises(ValueError, match="empty"):
-        rj.quaternion_mean(jnp.ones((0, 4)))
+        rj.quaternion_mean(np.ones((0, 4)))
 
 
-POINTS = {
-    "identity": np.eye(3),
-    "180 deg": np.diag([1.0, -1.0, -1.0]),
-    "rotation": Rotation.from_rotvec([0.3, -1.0, 0.5]).as_matrix(),
-    "noisy": Rotation.from_rotvec([0.3, -1.0, 0.5]).as_matrix()
-    + 0.3 * np.random.default_rng(5).standard_normal((3, 3)),
-}
+# Special points of the nearest-rotation kernel, stacked as one batch: one set of programs.
+POINTS = np.stack(
+    [
+        np.eye(3),  # identity
+        np.diag([1.0, -1.0, -1.0]),  # 180 degrees
+        Rotation.from_rotvec([0.3, -1.0, 0.5]).as_matrix(),  # a rotation
+        Rotation.from_rotvec([0.3, -1.0, 0.5]).as_matrix()
+        + 0.3 * np.random.default_rng(5).standard_normal((3, 3)),  # noisy
+    ]
+)
 
 
-@pytest.mark.slow  # every point compiles the kernel's second-derivative programs
-@pytest.mark.parametrize("name", list(POINTS))
-def test_second_derivatives(name):
-    # Sign-free outputs (the matrix), so the w >= 0 choice at 180 degrees does not matter.
-    M = POINTS[name]
-    check_grads(rj.nined_to_matrix, (M.reshape(9),), order=2, modes=["fwd", "rev"])
-    H = jax.hessian(lambda M: rj.matrix_to_quaternion(M, method="optimal"))(M)
-    assert np.isfinite(H).all()
+@pytest.mark.slow  # compiles the kernel's second-derivative programs
+@pytest.mark.parametrize("k", range(len(POINTS)))
+def test_second_derivatives(k):
+    """At the identity, 180 degrees, a rotation and a noisy matrix: ``nined_to_matrix``'s first
+    and second derivatives match finite differences, and the full Hessian of the optimal
+    ``matrix_to_quaternion`` is finite (sign-free matrix outputs, so the ``w >= 0`` choice at
+    180 degrees does not matter). The Hessians of all four points are one jitted program."""
+    check_grads(rj.nined_to_matrix, (POINTS[k].reshape(9),), order=2, modes=["fwd", "rev"])
+    assert np.isfinite(_optimal_hessians(jnp.asarray(POINTS))[k]).all()
+
+
+@jax.jit
+@jax.vmap
+@jax.hessian
+def _optimal_hessians(M):
+    return rj.matrix_to_quaternion(M, method="optimal")
 
 
 @pytest.mark.slow
 def test_mean_and_align_hessians_finite():
+    """The full Hessians of ``quaternion_mean`` at identical quaternions (ties among the lower
+    eigenvalues) and of ``align_vectors`` at orthonormal pairs are finite; the mean's first and
+    second derivatives match finite differences there."""
     q = jnp.tile(jnp.array([0.1, 0.2, 0.3, 0.9]), (3, 1))
-    assert np.isfinite(jax.hessian(rj.quaternion_mean)(q)).all()
+    assert np.isfinite(jax.jit(jax.hessian(rj.quaternion_mean))(q)).all()
     check_grads(lambda q: rj.quaternion_mean(q), (q,), order=2, modes=["fwd", "rev"])
     a = jnp.eye(3)
-    assert np.isfinite(jax.hessian(lambda a: rj.align_vectors(a, jnp.eye(3)))(a)).all()
+    assert np.isfinite(jax.jit(jax.hessian(lambda a: rj.align_vectors(a, jnp.eye(3))))(a)).all()
 
 
 def _spectral(lam, seed, n=12):
@@ -264,15 +279,17 @@ def test_nearest_rotation_is_the_matrix_of_nearest_quaternion(dtype):
     def via_q(B):
         return _to_matrix(nearest_quaternion(B))
 
-    Q, Qq = jax.jit(nearest_rotation)(B), jax.jit(via_q)(B)
+    # both in one program, and both tangents in one: the kernel's run is shared within each
+    Q, Qq = jax.jit(lambda B: (nearest_rotation(B), via_q(B)))(B)
     assert (
         np.abs(np.asarray(Q, np.float64) - np.asarray(Qq, np.float64)).max()
         <= 8 * np.finfo(dtype).eps
     )
     if dtype == np.float64:
         dB = rng.standard_normal(B.shape)
-        t = jax.jit(lambda B, dB: jax.jvp(nearest_rotation, (B,), (dB,))[1])(B, dB)
-        tq = jax.jit(lambda B, dB: jax.jvp(via_q, (B,), (dB,))[1])(B, dB)
+        t, tq = jax.jit(
+            lambda B, dB: tuple(jax.jvp(f, (B,), (dB,))[1] for f in (nearest_rotation, via_q))
+        )(B, dB)
         assert np.array_equal(np.asarray(t), np.asarray(tq))
 
 
@@ -404,17 +421,21 @@ def test_rules_equal_jax_derivative_of_the_kernel_code():
         rng.standard_normal((3, 3)),
         1e-5 * (R[3] + 0.1 * rng.standard_normal((3, 3))),
     ]
-    pairs = (
+    d1, d2 = np.stack([rng.standard_normal((2, 3, 3)) for _ in Bs], axis=1)  # per B: d1, d2
+
+    # the four matrices as one batch (the derivatives are per matrix): one eager pass
+    B, d1, d2 = map(jnp.asarray, (np.stack(Bs), d1, d2))
+
+    def t_and_h(f):
+        """The first and second directional derivatives of ``f`` at ``B``."""
+        return jax.jvp(lambda b: jax.jvp(f, (b,), (d1,))[1], (B,), (d2,))
+
+    for rule, code in (
         (nearest_quaternion, lambda b: _polar(b)[0]),
         (nearest_rotation, lambda b: _polar(b)[1]),
-    )
-    for B in map(jnp.asarray, Bs):
-        d1, d2 = (jnp.asarray(rng.standard_normal((3, 3))) for _ in range(2))
-        for rule, code in pairs:
-            t, t_code = (jax.jvp(f, (B,), (d1,))[1] for f in (rule, code))
-            h, h_code = (
-                jax.jvp(lambda b, f=f: jax.jvp(f, (b,), (d1,))[1], (B,), (d2,))[1]
-                for f in (rule, code)
-            )
-            assert np.abs(t - t_code).max() <= 1e-12 * np.abs(t_code).max()
-            assert np.abs(h - h_code).max() <= 1e-10 * np.abs(h_code).max()
+    ):
+        (t, h), (t_code, h_code) = t_and_h(rule), t_and_h(code)
+        # per matrix B
+        t, h, t_code, h_code = (np.asarray(x).reshape(len(Bs), -1) for x in (t, h, t_code, h_code))
+        assert (np.abs(t - t_code).max(-1) <= 1e-12 * np.abs(t_code).max(-1)).all()
+        assert (np.abs(h - h_code).max(-1) <= 1e-10 * np.abs(h_code).max(-1)).all()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -63,11 +65,24 @@ def test_geodesic_accurate_at_small_and_near_pi(angle):
     assert_close(d, angle, atol=4 * ulp(np.float64))
 
 
+# jitted: one program each, shared by the tests (eager differentiation dispatches many)
+_geodesic_grad = jax.jit(jax.grad(rj.geodesic_distance, argnums=(0, 1)))
+
+
 def test_geodesic_gradient_at_zero_is_finite_and_zero():
     R = random_rotations(1, 3)[0]
-    g = jax.grad(rj.geodesic_distance, argnums=(0, 1))(jnp.asarray(R), jnp.asarray(R))
+    g = _geodesic_grad(jnp.asarray(R), jnp.asarray(R))
     for gi in g:
         assert_close(gi, np.zeros((3, 3)), atol=0)
+
+
+@jax.jit
+def _geodesic_along(x, R1):
+    """The distance from the identity to ``exp(x) R1``."""
+    return rj.geodesic_distance(jnp.eye(3), rj.rotvec_to_matrix(x) @ R1)
+
+
+_geodesic_along_grad = jax.jit(jax.grad(_geodesic_along))
 
 
 @pytest.mark.parametrize("angle", [1e-4, 0.5, np.pi - 1e-3])
@@ -78,18 +93,18 @@ def test_geodesic_gradient_matches_fd(angle):
     R1 = rj.rotvec_to_matrix(angle * v / np.linalg.norm(v))
 
     def f(x):
-        return rj.geodesic_distance(jnp.eye(3), rj.rotvec_to_matrix(x) @ R1)
+        return _geodesic_along(x, R1)
 
     x0 = np.zeros(3)
-    g = jax.grad(f)(x0)
+    g = _geodesic_along_grad(x0, R1)
     assert_close(g, fd_jacobian(f, x0, h=1e-7), atol=2e-6)
     assert_close(np.linalg.norm(g), 1.0, atol=1e-6)
 
 
 def test_geodesic_gradient_at_pi_is_finite():
     R = rj.rotvec_to_matrix(np.pi * np.array([0.0, 0.6, 0.8]))
-    g = jax.grad(rj.geodesic_distance, argnums=1)(jnp.eye(3), R)
-    assert np.all(np.isfinite(g))
+    g = _geodesic_grad(jnp.eye(3), jnp.asarray(R))
+    assert all(np.all(np.isfinite(gi)) for gi in g)
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
@@ -101,7 +116,7 @@ def test_chordal_distance(dtype):
     assert d.dtype == dtype
     theta = np.asarray(rj.angle_between(p, q))
     assert_close(d, 2 * np.sqrt(2) * np.sin(theta / 2), atol=20 * ulp(dtype))
-    g = jax.grad(rj.chordal_distance)(Rp[0], Rp[0])
+    g = jax.jit(jax.grad(rj.chordal_distance))(Rp[0], Rp[0])
     assert_close(g, np.zeros((3, 3)), atol=0)
 
 
@@ -170,10 +185,13 @@ def test_nined_projection_value(name):
     assert_close(np.linalg.det(R), 1.0, atol=1e-14)
 
 
+_nined_jacobian = jax.jit(jax.jacobian(rj.nined_to_matrix))
+
+
 @pytest.mark.parametrize("name", list(SPECTRA))
 def test_nined_gradient_matches_fd_including_ties(name):
     M = spectral_matrix(SPECTRA[name], 10).reshape(9)
-    J = jax.jacobian(rj.nined_to_matrix)(jnp.asarray(M))
+    J = _nined_jacobian(jnp.asarray(M))
     assert_close(J, fd_jacobian(rj.nined_to_matrix, M, h=1e-6), atol=1e-8)
 
 
@@ -192,16 +210,20 @@ def test_nined_round_trip_of_rotations(dtype, shape):
     assert_close(out, R, atol=20 * ulp(dtype))
     # at a rotation (all singular values tied) the gradient is finite and is the projection
     # onto the tangent space: tangent directions pass, normal (symmetric) ones are removed.
-    g = jax.grad(
-        lambda x: jnp.sum(rj.nined_to_matrix(x) ** 2 * np.arange(9, dtype=dtype).reshape(3, 3))
-    )
-    assert np.all(np.isfinite(g(R.reshape(*shape, 9)[(0,) * len(shape)])))
+    assert np.all(np.isfinite(_nined_weighted_grad(R.reshape(*shape, 9)[(0,) * len(shape)])))
+
+
+@jax.jit
+@jax.grad
+def _nined_weighted_grad(x):
+    """Gradient of a weighted sum of squares of ``nined_to_matrix``: one program per dtype."""
+    return jnp.sum(rj.nined_to_matrix(x) ** 2 * jnp.arange(9, dtype=x.dtype).reshape(3, 3))
 
 
 def test_nined_gradient_finite_when_projection_not_unique():
     # rank 1: every rotation about one axis is equally near
     M = np.outer([1.0, 2.0, 0.5], [0.3, -1.0, 0.2]).reshape(9)
-    J = jax.jacobian(rj.nined_to_matrix)(jnp.asarray(M))
+    J = _nined_jacobian(jnp.asarray(M))
     assert np.all(np.isfinite(J)) and np.abs(J).max() > 0
 
 
@@ -292,7 +314,7 @@ def test_sum_outer_rule_equals_jax_derivative_of_its_code(n, scale):
     def code(u, v):
         return _sum_outer.fun(u * scale, v * scale, fx, fy)
 
-    want, got = jax.jvp(code, (u, v), (du, dv)), jax.jvp(rule, (u, v), (du, dv))
+    want, got = (jax.jit(partial(jax.jvp, f))((u, v), (du, dv)) for f in (code, rule))
     assert float(jnp.min(jnp.abs(want[0]))) > 1e-6
     assert_close(got[0], want[0], atol=0)
     assert_close(got[1], want[1], atol=1e-14)
@@ -319,10 +341,12 @@ def test_sum_outer_rule_broadcasts_like_its_code():
     def code(x, y):
         return _sum_outer.fun(x, y, (), ())
 
-    assert_close(jax.jvp(rule, (x, y), (dx, dy))[1], jax.jvp(code, (x, y), (dx, dy))[1], 1e-14)
+    # jitted: one program each (eager differentiation dispatches many)
+    tangents = (jax.jit(partial(jax.jvp, f))((x, y), (dx, dy))[1] for f in (rule, code))
+    assert_close(*tangents, 1e-14)
 
     def grads(f):
-        return jax.grad(lambda x, y: jnp.sum(jnp.sin(f(x, y))), argnums=(0, 1))(x, y)
+        return jax.jit(jax.grad(lambda x, y: jnp.sum(jnp.sin(f(x, y))), argnums=(0, 1)))(x, y)
 
     for got, want in zip(grads(rule), grads(code), strict=True):
         assert got.shape == want.shape
@@ -375,7 +399,8 @@ def test_align_single_pair(method, dtype):
     na, nb = np.linalg.norm(a.astype(np.float64)), np.linalg.norm(b.astype(np.float64))
     u = a[0].astype(np.float64) / na
     assert_close(np.asarray(Rb, np.float64) / nb, u, atol=20 * ulp(dtype))
-    (Jq_a, Jq_b), (Ja, Jb) = jax.jacobian(f, argnums=(0, 1))(jnp.asarray(a), jnp.asarray(b))
+    jac = jax.jit(jax.jacobian(f, argnums=(0, 1)))  # one program (eager: many)
+    (Jq_a, Jq_b), (Ja, Jb) = jac(jnp.asarray(a), jnp.asarray(b))
     assert all(np.all(np.isfinite(j)) for j in (Jq_a, Jq_b))
     tol = 1e-8 if dtype == np.float64 else 1e-3
     assert_close(Ja[:, 0, :], nb / na * (np.eye(3) - np.outer(u, u)), atol=tol)
@@ -392,6 +417,12 @@ NOISE_FREE_SETS = {
 }
 
 
+# one program per method and shape, shared by the sets of a shape
+@partial(jax.jit, static_argnames="method")
+def _align_jacobian(a, b, method):
+    return jax.jacobian(lambda a: rj.align_vectors(a, b, method=method))(a)
+
+
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", list(NOISE_FREE_SETS))
 def test_align_noise_free(method, name):
@@ -405,7 +436,7 @@ def test_align_noise_free(method, name):
     def f(a):
         return rj.align_vectors(a, b, method=method)
 
-    J = jax.jacobian(f)(jnp.asarray(a))
+    J = _align_jacobian(jnp.asarray(a), b, method)
     assert_close(J, fd_jacobian(f, a, h=1e-6), atol=1e-8)
 
 
@@ -517,6 +548,10 @@ def test_slerp_constant_angular_speed_and_short_way():
     assert_close(rj.angle_between(path[:-1], path[1:]), np.full(10, theta / 10), atol=1e-14)
 
 
+# one program, shared by the tests (eager differentiation dispatches many)
+_slerp_jacobian = jax.jit(jax.jacobian(rj.slerp, argnums=(0, 1, 2)))
+
+
 @pytest.mark.parametrize("gap", [0.0, 1e-12, 1e-7])
 def test_slerp_stable_as_p_approaches_q(gap):
     p = random_quaternions(1, 33)[0]
@@ -525,7 +560,7 @@ def test_slerp_stable_as_p_approaches_q(gap):
     theta = float(rj.angle_between(p, q))
     assert_close(rj.angle_between(p, out), 0.3 * theta, atol=1e-15)
     assert_close(rj.angle_between(out, q), 0.7 * theta, atol=1e-15)
-    Jp, Jq, _ = jax.jacobian(rj.slerp, argnums=(0, 1, 2))(jnp.asarray(p), jnp.asarray(q), 0.3)
+    Jp, Jq, _ = _slerp_jacobian(jnp.asarray(p), jnp.asarray(q), 0.3)
     assert_close(Jp, fd_jacobian(lambda x: rj.slerp(x, q, 0.3), p), atol=1e-8)
     assert_close(Jq, fd_jacobian(lambda x: rj.slerp(p, x, 0.3), q), atol=1e-8)
 
@@ -535,7 +570,7 @@ def test_slerp_antipodal_is_constant_path():
     t = np.linspace(-0.5, 1.5, 9)
     path = rj.slerp(p, -p, t)
     assert_close(path, np.broadcast_to(p, (9, 4)), atol=1e-15)
-    J = jax.jacobian(rj.slerp, argnums=(0, 1, 2))(jnp.asarray(p), jnp.asarray(-p), 0.4)
+    J = _slerp_jacobian(jnp.asarray(p), jnp.asarray(-p), 0.4)
     assert all(np.all(np.isfinite(j)) for j in J)
 
 
