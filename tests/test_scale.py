@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from helpers import SEQS, angle_diff, assert_close, random_quaternions
+from scipy.spatial.transform import Rotation
 
 import rotjax as rj
 from rotjax._euler import _abcd_patterns, _layout
@@ -22,9 +23,13 @@ SCALES = {
 CASES = [(dt, s) for dt, scales in SCALES.items() for s in scales]
 IDS = [f"{np.dtype(dt).name}-{s:g}" for dt, s in CASES]
 
+# The batch size at which the Euler conversions are called per sequence and dtype in
+# tests/test_core_oracle.py and tests/test_bench.py: the same programs, compiled once.
+BATCH = 640
+
 Q = np.concatenate([random_quaternions(6, seed=41), [[0.0, 0, 0, 1], [0.0, 0.6, 0.8, 0]]])
 P = random_quaternions(8, seed=42)
-R = np.asarray(rj.quaternion_to_matrix(Q))
+R = Rotation.from_quat(Q).as_matrix()  # by scipy: nothing compiled at import
 V = np.random.default_rng(43).normal(size=(8, 3))
 
 
@@ -150,7 +155,7 @@ def test_gradient_at_any_scale_is_the_unit_gradient_over_the_scale(name):
     f, is_matrix = GRAD_FUNCTIONS[name]
     x = (R if is_matrix else Q)[:4]
     rng = np.random.default_rng(45)
-    w = jnp.asarray(rng.normal(size=np.shape(f(x))))
+    w = jnp.asarray(rng.normal(size=jax.eval_shape(f, x).shape))  # f's output shape
     g = jax.jit(jax.grad(lambda v: jnp.sum(w * f(v))))
     g1 = np.asarray(g(jnp.asarray(x)))
     for s in (2.0**-900, 1e-200, 3.0, 1e200):
@@ -215,8 +220,9 @@ def test_euler_angles_keep_a_small_rotation_next_to_a_tiny_factor(seq):
     for dtype, small, delta in ((np.float64, 1e-7, 2e-303), (np.float32, 1e-3, 1e-36)):
         pat = _abcd_patterns(seq)  # abcd = pat @ q
         q = (pat.T @ np.array([1.0, small, delta, 0.0]) / (pat[0] @ pat[0])).astype(dtype)
-        back = rj.euler_to_matrix(rj.quaternion_to_euler(q, seq), seq)
-        want = rj.quaternion_to_matrix(q)
+        qs = np.broadcast_to(q, (BATCH, 4))  # the batch shape of tests/test_core_oracle.py
+        back = rj.euler_to_matrix(rj.quaternion_to_euler(qs, seq), seq)
+        want = rj.quaternion_to_matrix(qs)
         assert_close(back, want, atol=8 * np.finfo(dtype).eps, err_msg=f"{dtype} {seq}")
 
 
