@@ -396,18 +396,24 @@ def test_derivatives_at_zero_are_exact():
 
 @pytest.mark.parametrize("batch", [(), (2,), (2, 3)], ids=str)
 def test_batch_shapes_and_dtypes(batch):
-    xi = RNG.normal(size=(*batch, 6)).astype(np.float32)
-    assert rj.se3_exp(xi).shape == (*batch, 4, 4)
-    assert rj.se3_exp(xi).dtype == np.float32
-    T = rj.se3_exp(xi)
-    assert rj.se3_log(T).shape == (*batch, 6) and rj.se3_log(T).dtype == np.float32
-    assert rj.se3_adjoint(T).shape == (*batch, 6, 6)
+    """Output shapes and dtypes of every function at each batch shape, float32 in, float32
+    out (integers promote to the default float). Traced, not run: shapes and dtypes are fixed
+    by tracing."""
+
+    def out(name, x):
+        return jax.eval_shape(getattr(rj, name), x)
+
+    xi = jax.ShapeDtypeStruct((*batch, 6), np.float32)
+    T = out("se3_exp", xi)
+    assert (T.shape, T.dtype) == ((*batch, 4, 4), np.float32)
+    log = out("se3_log", T)
+    assert (log.shape, log.dtype) == ((*batch, 6), np.float32)
+    assert out("se3_adjoint", T).shape == (*batch, 6, 6)
     for name in SE3_FUNS[1:]:
-        assert getattr(rj, name)(xi).shape == (*batch, 6, 6)
-        assert getattr(rj, name)(xi).dtype == np.float32
+        assert (out(name, xi).shape, out(name, xi).dtype) == ((*batch, 6, 6), np.float32)
+    p = jax.ShapeDtypeStruct((*batch, 3), np.float32)
     for name in SO3_FUNS:
-        assert getattr(rj, name)(xi[..., :3]).shape == (*batch, 3, 3)
-    # integers promote to the default float
+        assert out(name, p).shape == (*batch, 3, 3)
     assert rj.se3_exp(np.zeros(6, int)).dtype == np.float64
 
 
