@@ -111,14 +111,15 @@ def test_grad_matches_directional_derivatives():
     x = _params()
     g = jax.jit(manifold.grad(_loss))(x)
     assert jax.tree.structure(g) == jax.tree.structure(manifold.zero_tangents(x))
+    h = 1e-5
+
+    @jax.jit  # one program for every direction and step
+    def step(s, d):
+        return _loss(manifold.rplus(x, jax.tree.map(lambda t: s * h * t, d)))
+
     for seed in range(3):
         d = _random_tangents(x, 1.0, 10 + seed)
-        h = 1e-5
-
-        def step(s, d=d, h=h):
-            return _loss(manifold.rplus(x, jax.tree.map(lambda t: s * h * t, d)))
-
-        fd = (step(1.0) - step(-1.0)) / (2 * h)
+        fd = (step(1.0, d) - step(-1.0, d)) / (2 * h)
         dot = sum(
             jnp.sum(a * b) for a, b in zip(jax.tree.leaves(g), jax.tree.leaves(d), strict=True)
         )
@@ -129,13 +130,16 @@ def test_grad_is_the_body_frame_gradient():
     """f(R) = a . (R v): the tangent gradient is v x (R^T a); f(T) = a . (T p): rotation part
     p x (R^T a), translation part R^T a. At the identity and at 180 degrees too."""
     a, v = np.array([0.3, -2.0, 1.0]), np.array([1.5, 0.5, -1.0])
+    # compiled once, for the three points
+    rot_grad = jax.jit(manifold.grad(lambda r: jnp.dot(a, r.apply(v))))
+    pose_grad = jax.jit(manifold.grad(lambda t: jnp.dot(a, t.apply(v))))
     for w in (np.zeros(3), np.array([np.pi, 0, 0]), np.array([0.4, 1.0, -0.2])):
         R = rj.Rotation.from_rotvec(w)
-        g = manifold.grad(lambda r: jnp.dot(a, r.apply(v)))(R)
+        g = rot_grad(R)
         Rm = np.asarray(R.as_matrix())
         assert_close(g, np.cross(v, Rm.T @ a), atol=1e-14)
         T = rj.RigidTransform.from_components(np.array([1.0, 2.0, 3.0]), R)
-        g = manifold.grad(lambda t: jnp.dot(a, t.apply(v)))(T)
+        g = pose_grad(T)
         assert_close(g, np.concatenate([np.cross(v, Rm.T @ a), Rm.T @ a]), atol=1e-14)
 
 
@@ -146,14 +150,20 @@ def test_argnums_tuple_value_and_has_aux():
     def f(scale, p):
         return scale * _loss(p), {"aux": scale}
 
-    (val, aux), (gs, gp) = manifold.value_and_grad(f, argnums=(0, 1), has_aux=True)(s, x)
-    assert_close(val, 2 * _loss(x), rtol=1e-15)
-    assert aux["aux"] == 2.0
-    assert_close(gs, _loss(x), rtol=1e-15)
-    g1 = manifold.grad(_loss)(x)
+    def all_of_them(s, x):  # one compiled program
+        return (
+            manifold.value_and_grad(f, argnums=(0, 1), has_aux=True)(s, x),
+            _loss(x),
+            manifold.grad(_loss)(x),
+            manifold.grad(f, argnums=1, has_aux=True)(s, x),
+        )
+
+    ((val, aux), (gs, gp)), loss, g1, (gp_only, aux1) = jax.jit(all_of_them)(s, x)
+    assert_close(val, 2 * loss, rtol=1e-15)
+    assert aux["aux"] == 2.0 and aux1["aux"] == 2.0
+    assert_close(gs, loss, rtol=1e-15)
     for a, b in zip(jax.tree.leaves(gp), jax.tree.leaves(g1), strict=True):
         assert_close(a, 2 * b, rtol=1e-14, atol=1e-14)
-    gp_only, aux = manifold.grad(f, argnums=1, has_aux=True)(s, x)
     assert jax.tree.structure(gp_only) == jax.tree.structure(g1)
     # the Euclidean leaf's gradient is jax.grad's
     assert_close(g1["bias"], jnp.cos(x["bias"]), rtol=1e-15)
@@ -174,11 +184,14 @@ def test_grad_finite_at_the_identity_and_at_180_degrees(dtype):
         v = jnp.asarray([1.0, 2.0, 3.0], dtype)
         return jnp.sum(p["rot"].apply(v) ** 2 @ v) + jnp.sum(p["pose"].apply(v) @ v)
 
-    g = manifold.grad(f)(x)
+    def both(x):  # one program: the tangent gradient, and the Hessian at the zero tangent
+        h = jax.hessian(lambda d: f(manifold.rplus(x, d)))(manifold.zero_tangents(x))
+        return manifold.grad(f)(x), h
+
+    g, h = jax.jit(both)(x)
     for leaf in jax.tree.leaves(g):
         assert leaf.dtype == dtype and np.all(np.isfinite(leaf))
     assert np.any(g["rot"]) and np.any(g["pose"])
-    h = jax.jit(jax.hessian(lambda d: f(manifold.rplus(x, d))))(manifold.zero_tangents(x))
     assert all(np.all(np.isfinite(leaf)) for leaf in jax.tree.leaves(h))
 
 

@@ -423,36 +423,63 @@ SINGULAR = {
 }
 
 
-# Slow: each point compiles the pose's second-derivative programs (test_se3 checks the same
-# coordinates' functions at their singular points by default).
+def _at(wheres):
+    """The poses of SINGULAR's rotation vectors at ``wheres``, with one translation, stacked."""
+    w = np.stack([SINGULAR[k] for k in wheres])
+    return jnp.asarray(np.concatenate([w, np.broadcast_to([0.3, -1.2, 2.0], w.shape)], -1))
+
+
+def _pose_matrix(x):
+    return Tf.from_exp_coords(x).as_matrix()
+
+
+def _pose_log(x):
+    return Tf.from_exp_coords(x).as_exp_coords()
+
+
+# Slow: check_grads' second-order programs of the pose (test_se3 checks the same coordinates'
+# functions at their singular points by default).
 @pytest.mark.slow
-@pytest.mark.parametrize("where", list(SINGULAR))
-def test_exp_derivatives_finite_and_right(where):
-    xi = jnp.concatenate([jnp.asarray(SINGULAR[where]), jnp.asarray([0.3, -1.2, 2.0])])
-    f = lambda x: Tf.from_exp_coords(x).as_matrix()  # noqa: E731
-    check_grads(f, (xi,), order=2, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
-    jac = np.asarray(jax.jacfwd(f)(xi))
-    assert np.all(np.isfinite(jac))
-    hess = np.asarray(jax.hessian(lambda x: jnp.sum(f(x) ** 3))(xi))
-    assert np.all(np.isfinite(hess))
+def test_exp_derivatives_finite_and_right():
+    """At every point of SINGULAR (0, 1e-300, tiny, the series cut, pi, two pi): first and
+    second derivatives of the pose matrix agree with finite differences (check_grads at order
+    2, forward and reverse, on the batch of all points: its elementwise tolerances judge each
+    point's rows), the Jacobian and the Hessian of a sum of cubes are finite."""
+    xi = _at(SINGULAR)
+    check_grads(jax.vmap(_pose_matrix), (xi,), order=2, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
+    # one program: the Jacobian and jax.hessian's forward-over-reverse Hessian
+    cubes = jax.grad(lambda x: jnp.sum(_pose_matrix(x) ** 3))
+    jac, hess = jax.jit(jax.vmap(jax.jacfwd(lambda x: (_pose_matrix(x), cubes(x)))))(xi)
+    assert np.all(np.isfinite(np.asarray(jac)))
+    assert np.all(np.isfinite(np.asarray(hess)))
 
 
 @pytest.mark.slow  # as test_exp_derivatives_finite_and_right
-@pytest.mark.parametrize("where", ["zero", "tiny", "small", "threshold", "pi", "x_pi"])
-def test_log_derivatives_finite_and_exact(where):
-    """log(exp(xi)) = xi for angles up to pi: its Jacobian is the identity, exactly at 0 and
-    at 180 degrees too (the derivative of the formula computed)."""
-    xi = jnp.concatenate([jnp.asarray(SINGULAR[where]), jnp.asarray([0.3, -1.2, 2.0])])
-    f = lambda x: Tf.from_exp_coords(x).as_exp_coords()  # noqa: E731
-    assert_close(f(xi), xi, atol=1e-15 * 4)
-    assert_close(jax.jacfwd(f)(xi), np.eye(6), atol=4e-15)
-    assert_close(jax.jacrev(f)(xi), np.eye(6), atol=4e-15)
-    second = np.asarray(jax.jacfwd(jax.jacrev(f))(xi))
+def test_log_derivatives_finite_and_exact():
+    """log(exp(xi)) = xi for angles up to pi (0, 1e-300, tiny, the series cut, pi, x pi): its
+    Jacobian is the identity, exactly at 0 and at 180 degrees too (the derivative of the
+    formula computed), by forward and by reverse mode; its second derivative is finite, and
+    zero away from the series cut; away from pi (where finite differences cross the log's cut)
+    check_grads at order 2 on the batch of those points."""
+    wheres = ["zero", "tiny", "small", "threshold", "pi", "x_pi"]
+    xi = _at(wheres)
+
+    def rev(x):  # differentiated forward again; the value and both Jacobians as aux
+        jr = jax.jacrev(_pose_log)(x)
+        return jr, (_pose_log(x), jax.jacfwd(_pose_log)(x), jr)
+
+    second, (value, fwd, back) = jax.jit(jax.vmap(jax.jacfwd(rev, has_aux=True)))(xi)
+    assert_close(value, xi, atol=1e-15 * 4)
+    eye = np.broadcast_to(np.eye(6), (len(wheres), 6, 6))
+    assert_close(fwd, eye, atol=4e-15)
+    assert_close(back, eye, atol=4e-15)
+    second = np.asarray(second)
     assert np.all(np.isfinite(second))
-    if where != "threshold":
-        assert_close(second, np.zeros((6, 6, 6)), atol=2e-14)
-    if "pi" not in where:  # at 180 degrees finite differences cross the log's cut
-        check_grads(f, (xi,), order=2, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
+    for where, s in zip(wheres, second, strict=True):
+        if where != "threshold":
+            assert_close(s, np.zeros((6, 6, 6)), atol=2e-14, err_msg=where)
+    away = _at([w for w in wheres if "pi" not in w])
+    check_grads(jax.vmap(_pose_log), (away,), order=2, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
 
 
 def test_derivative_at_identity_is_the_hat_map():

@@ -95,16 +95,24 @@ def _mp_vec(x):
     return [mp.mpf(float(v)) for v in x]
 
 
+@functools.cache
+def _mp_jacobian(group, sign, x):
+    """The series sum (sign ad)^n / (n+1)! of se(3) or so(3) at the mpf coordinates ``x`` (a
+    tuple): a Jacobian, computed once for it and its inverse."""
+    A = _mp_ad(x) if group == "se3" else _mp_hat(x[:3])
+    return _mp_series(A if sign > 0 else -A, 1)
+
+
 _MP_FUNS = {  # reference exp, Jl, Jr and inverses of SE(3) and SO(3), of mpf coordinates
     "se3_exp": lambda x: _mp_series(_mp_twist(x), 0),
-    "se3_left_jacobian": lambda x: _mp_series(_mp_ad(x), 1),
-    "se3_right_jacobian": lambda x: _mp_series(-_mp_ad(x), 1),
-    "se3_left_jacobian_inverse": lambda x: mp.inverse(_mp_series(_mp_ad(x), 1)),
-    "se3_right_jacobian_inverse": lambda x: mp.inverse(_mp_series(-_mp_ad(x), 1)),
-    "so3_left_jacobian": lambda x: _mp_series(_mp_hat(x[:3]), 1),
-    "so3_right_jacobian": lambda x: _mp_series(-_mp_hat(x[:3]), 1),
-    "so3_left_jacobian_inverse": lambda x: mp.inverse(_mp_series(_mp_hat(x[:3]), 1)),
-    "so3_right_jacobian_inverse": lambda x: mp.inverse(_mp_series(-_mp_hat(x[:3]), 1)),
+    "se3_left_jacobian": lambda x: _mp_jacobian("se3", 1, tuple(x)),
+    "se3_right_jacobian": lambda x: _mp_jacobian("se3", -1, tuple(x)),
+    "se3_left_jacobian_inverse": lambda x: mp.inverse(_mp_jacobian("se3", 1, tuple(x))),
+    "se3_right_jacobian_inverse": lambda x: mp.inverse(_mp_jacobian("se3", -1, tuple(x))),
+    "so3_left_jacobian": lambda x: _mp_jacobian("so3", 1, tuple(x[:3])),
+    "so3_right_jacobian": lambda x: _mp_jacobian("so3", -1, tuple(x[:3])),
+    "so3_left_jacobian_inverse": lambda x: mp.inverse(_mp_jacobian("so3", 1, tuple(x[:3]))),
+    "so3_right_jacobian_inverse": lambda x: mp.inverse(_mp_jacobian("so3", -1, tuple(x[:3]))),
 }
 SE3_FUNS = [f for f in _MP_FUNS if f.startswith("se3")]
 SO3_FUNS = [f for f in _MP_FUNS if f.startswith("so3")]
@@ -323,11 +331,12 @@ def test_first_and_second_derivatives_are_finite_at_singular_points(name):
         args = SPECIAL if name.startswith("se3") else SPECIAL[:, :3]
 
     def total(a):
-        return jnp.sum(f(a) * jnp.arange(1.0, 1 + f(a).size).reshape(f(a).shape))
+        y = f(a)
+        return jnp.sum(y * jnp.arange(1.0, 1 + y.size).reshape(y.shape))
 
-    # one compiled program each (eager transforms would dispatch op by op)
-    J = jax.jit(jax.vmap(jax.jacfwd(f)))(jnp.asarray(args))
-    H = jax.jit(jax.vmap(jax.hessian(total)))(jnp.asarray(args))
+    # One compiled program for the Jacobian of f and the Hessian of total (forward over the
+    # reverse gradient), at every point of the batch.
+    J, H = jax.jit(jax.vmap(jax.jacfwd(lambda a: (f(a), jax.grad(total)(a)))))(jnp.asarray(args))
     assert np.isfinite(J).all() and np.isfinite(H).all(), name
     assert np.any(J[0]) and np.any(J[1])
 
@@ -341,37 +350,45 @@ def test_log_of_exp_has_identity_derivative_and_zero_second_derivative():
     def round_trip(v):
         return rj.se3_log(rj.se3_exp(v))
 
-    J = jax.jit(jax.vmap(jax.jacfwd(round_trip)))(x)
+    def jacobian(v):
+        J = jax.jacfwd(round_trip)(v)
+        return J, J
+
+    # one program: the second derivative, with the first as its auxiliary output
+    H, J = jax.jit(jax.vmap(jax.jacfwd(jacobian, has_aux=True)))(x)
     assert_close(J, np.broadcast_to(np.eye(6), J.shape), atol=1e-9)
     small = np.linalg.norm(np.asarray(x[:, :3]), axis=-1) < 3
     assert_close(J[small], np.broadcast_to(np.eye(6), J[small].shape), atol=64 * EPS[np.float64])
-    H = jax.jit(jax.vmap(jax.jacfwd(jax.jacfwd(round_trip))))(x[small])
-    assert_close(H, np.zeros(H.shape), atol=1e-11)
+    assert_close(H[small], np.zeros(H[small].shape), atol=1e-11)
 
 
 def test_derivatives_at_zero_are_exact():
     """At 0: d exp(xi) = hat(d xi); d Jl(p)[., .] / dp = hat(.)/2, d Jr = -hat/2, and the
     second derivative of Jl at 0 is that of the series, (P^2)/6's."""
-    z = jnp.zeros(6)
-    D = np.asarray(jax.jit(jax.jacfwd(rj.se3_exp))(z))
+    D = np.asarray(jax.jit(jax.jacfwd(rj.se3_exp))(jnp.zeros(6)))
     for i in range(6):
         assert_close(D[..., i], rj.hat(np.eye(6)[i]), atol=0)
-    # compiled once, for both points
-    jac_l, jac_r = (jax.jit(jax.jacfwd(f)) for f in (rj.so3_left_jacobian, rj.so3_right_jacobian))
-    hess_l = jax.jit(jax.hessian(rj.so3_left_jacobian))
-    for p0 in (np.zeros(3), np.full(3, 1e-300)):
-        dJl = np.asarray(jac_l(jnp.asarray(p0)))
-        dJr = np.asarray(jac_r(jnp.asarray(p0)))
+
+    def derivatives(p):
+        def jl(p):  # reverse mode, differentiated again as jax.hessian does; forward as aux
+            return jax.jacrev(rj.so3_left_jacobian)(p), jax.jacfwd(rj.so3_left_jacobian)(p)
+
+        H, dJl = jax.jacfwd(jl, has_aux=True)(p)
+        return dJl, jax.jacfwd(rj.so3_right_jacobian)(p), H
+
+    # one program, at both points
+    p0 = jnp.asarray(np.stack([np.zeros(3), np.full(3, 1e-300)]))
+    dJls, dJrs, Hs = (np.asarray(a) for a in jax.jit(jax.vmap(derivatives))(p0))
+    e = np.eye(3)
+    E = [np.asarray(rj.hat(e[i])) for i in range(3)]
+    for dJl, dJr, H in zip(dJls, dJrs, Hs, strict=True):
         for i in range(3):
             # (at 1e-300 the exact derivative differs from that at 0 by O(1e-300))
-            assert_close(dJl[..., i], np.asarray(rj.hat(np.eye(3)[i])) / 2, atol=1e-299)
-            assert_close(dJr[..., i], -np.asarray(rj.hat(np.eye(3)[i])) / 2, atol=1e-299)
-        H = np.asarray(hess_l(jnp.asarray(p0)))
-        e = np.eye(3)
+            assert_close(dJl[..., i], E[i] / 2, atol=1e-299)
+            assert_close(dJr[..., i], -E[i] / 2, atol=1e-299)
         for i in range(3):
             for j in range(3):
-                Ei, Ej = np.asarray(rj.hat(e[i])), np.asarray(rj.hat(e[j]))
-                assert_close(H[..., i, j], (Ei @ Ej + Ej @ Ei) / 6, atol=1e-16)
+                assert_close(H[..., i, j], (E[i] @ E[j] + E[j] @ E[i]) / 6, atol=1e-16)
 
 
 # --- shapes, dtypes, errors -------------------------------------------------------------
@@ -379,18 +396,24 @@ def test_derivatives_at_zero_are_exact():
 
 @pytest.mark.parametrize("batch", [(), (2,), (2, 3)], ids=str)
 def test_batch_shapes_and_dtypes(batch):
-    xi = RNG.normal(size=(*batch, 6)).astype(np.float32)
-    assert rj.se3_exp(xi).shape == (*batch, 4, 4)
-    assert rj.se3_exp(xi).dtype == np.float32
-    T = rj.se3_exp(xi)
-    assert rj.se3_log(T).shape == (*batch, 6) and rj.se3_log(T).dtype == np.float32
-    assert rj.se3_adjoint(T).shape == (*batch, 6, 6)
+    """Output shapes and dtypes of every function at each batch shape, float32 in, float32
+    out (integers promote to the default float). Traced, not run: shapes and dtypes are fixed
+    by tracing."""
+
+    def out(name, x):
+        return jax.eval_shape(getattr(rj, name), x)
+
+    xi = jax.ShapeDtypeStruct((*batch, 6), np.float32)
+    T = out("se3_exp", xi)
+    assert (T.shape, T.dtype) == ((*batch, 4, 4), np.float32)
+    log = out("se3_log", T)
+    assert (log.shape, log.dtype) == ((*batch, 6), np.float32)
+    assert out("se3_adjoint", T).shape == (*batch, 6, 6)
     for name in SE3_FUNS[1:]:
-        assert getattr(rj, name)(xi).shape == (*batch, 6, 6)
-        assert getattr(rj, name)(xi).dtype == np.float32
+        assert (out(name, xi).shape, out(name, xi).dtype) == ((*batch, 6, 6), np.float32)
+    p = jax.ShapeDtypeStruct((*batch, 3), np.float32)
     for name in SO3_FUNS:
-        assert getattr(rj, name)(xi[..., :3]).shape == (*batch, 3, 3)
-    # integers promote to the default float
+        assert out(name, p).shape == (*batch, 3, 3)
     assert rj.se3_exp(np.zeros(6, int)).dtype == np.float64
 
 
