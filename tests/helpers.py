@@ -93,6 +93,20 @@ def fd_jacobian(f, x, h=1e-6):
     return jac
 
 
+# The batch of every oracle comparison (tests/test_core_oracle.py, test_bench.py, test_scale.py):
+# one compiled program per function, Euler sequence, method and dtype, shared by those files.
+ORACLE_BATCH = 640
+
+
+def padded_call(f, x, *args, **kwargs):
+    """``f(x, *args, **kwargs)`` on ``x`` padded to :data:`ORACLE_BATCH` rows (by repeating
+    its first row), for ``x``'s rows only."""
+    x = np.asarray(x)
+    n = len(x)
+    pad = np.broadcast_to(x[:1], (ORACLE_BATCH - n, *x.shape[1:]))
+    return np.asarray(f(np.concatenate([x, pad]), *args, **kwargs))[:n]
+
+
 def undecorated(kernel, *static, matrix=()):
     """The function a component kernel's wrapper computes, with the kernel's ``custom_jvp``
     removed: its arguments split into components by slicing (a matrix, index in ``matrix``,

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import mpmath as mp
 import numpy as np
 import pytest
-from helpers import SEQS, check_grads, sweep, ulp
+from helpers import SEQS, check_grads, padded_call, sweep, ulp
 
 import rotjax as rj
 from rotjax._bench import accuracy as A
@@ -25,20 +25,6 @@ from rotjax._bench import report as R
 CLEAN_SETS = ["uniform", "near_identity", "near_180", "exact_180", "ties"]
 # Documented componentwise bounds in eps on rotation matrices (see matrix_to_quaternion).
 M2Q_BOUND = {"shepperd": 2.0, "markley": 2.0, "optimal": 2.0}
-
-# The conversions checked per Euler sequence and per method take a batch of this many rotations
-# (the inputs padded by repeating their first row, the padding's results dropped): one compiled
-# program per function, sequence, method and dtype, the one tests/test_core_oracle.py and
-# tests/test_scale.py compile too.
-BATCH = 640
-
-
-def _call(f, x, *args, **kwargs):
-    """``f(x, *args, **kwargs)`` on ``x`` padded to :data:`BATCH` rows, for ``x``'s rows only."""
-    x = np.asarray(x)
-    n = len(x)
-    pad = np.broadcast_to(x[:1], (BATCH - n, *x.shape[1:]))
-    return np.asarray(f(np.concatenate([x, pad]), *args, **kwargs))[:n]
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +46,7 @@ def test_matrix_to_quaternion_within_bound(qsets, method, set_name, dtype):
         q = qsets[set_name]
     R = np.asarray(jnp.asarray(A.np_matrix(q), dtype=dtype)).astype(np.float64)
     ref = np.array([[float(c) for c in A.mp_optimal_quaternion(r)] for r in R])
-    got = _call(rj.matrix_to_quaternion, R.astype(dtype), method=method)
+    got = padded_call(rj.matrix_to_quaternion, R.astype(dtype), method=method)
     assert got.dtype == dtype
     err = A.quat_err(np.asarray(got, np.float64), ref) / ulp(dtype)
     assert np.all(np.isfinite(err))
@@ -87,13 +73,13 @@ def test_euler_backward_error_every_set(qsets, seq, dtype):
     q = np.concatenate([*some, g_exact, g_near])
     q = np.asarray(jnp.asarray(q, dtype=dtype)).astype(np.float64)
     bound = {np.float32: 7.0, np.float64: 5.0}[dtype] * ulp(dtype)
-    ang = _call(rj.quaternion_to_euler, q.astype(dtype), seq)
+    ang = padded_call(rj.quaternion_to_euler, q.astype(dtype), seq)
     assert ang.dtype == dtype
     err = _backward_errors(ang, seq, _mp_quaternions(q))
     assert err.max() <= bound, f"quaternion_to_euler {seq}: {err.max() / ulp(dtype):.2f} eps"
     R = np.asarray(jnp.asarray(A.np_matrix(q), dtype=dtype)).astype(np.float64)
     ref = [A.mp_optimal_quaternion(r) for r in R]
-    m2e = _call(rj.matrix_to_euler, R.astype(dtype), seq)
+    m2e = padded_call(rj.matrix_to_euler, R.astype(dtype), seq)
     err = _backward_errors(m2e, seq, ref)
     assert err.max() <= bound, f"matrix_to_euler {seq}: {err.max() / ulp(dtype):.2f} eps"
 
@@ -124,7 +110,7 @@ def test_noisy_matrices_ordering(sigma):
     R = A.noisy(np.random.default_rng(11), 48, sigma)
     ref = np.array([[float(c) for c in A.mp_optimal_quaternion(r)] for r in R])
     err = {
-        m: A.quat_err(_call(rj.matrix_to_quaternion, R, method=m), ref)
+        m: A.quat_err(padded_call(rj.matrix_to_quaternion, R, method=m), ref)
         for m in ("shepperd", "markley", "optimal")
     }
     med = {m: np.median(e) for m, e in err.items()}

@@ -17,6 +17,7 @@ from helpers import (
     mp_matrix_to_quaternion,
     mp_max_diff,
     mp_quat_to_matrix,
+    padded_call,
     random_quaternions,
 )
 from scipy.spatial.transform import Rotation
@@ -24,20 +25,6 @@ from scipy.spatial.transform import Rotation
 import rotjax as rj
 
 EPS64 = np.finfo(np.float64).eps
-
-# Every call of a rotjax function here takes a batch of this many rotations (its inputs padded
-# by repeating their first row, the padding's results dropped): one compiled program per
-# function, Euler sequence and dtype, shared by the tests (and by tests/test_bench.py and
-# tests/test_scale.py, which pad to the same size).
-BATCH = 640
-
-
-def _call(f, x, *args, **kwargs):
-    """``f(x, *args, **kwargs)`` on ``x`` padded to :data:`BATCH` rows, for ``x``'s rows only."""
-    x = np.asarray(x)
-    n = len(x)
-    pad = np.broadcast_to(x[:1], (BATCH - n, *x.shape[1:]))
-    return np.asarray(f(np.concatenate([x, pad]), *args, **kwargs))[:n]
 
 
 def _normalise(q):
@@ -85,26 +72,26 @@ def test_matrix_to_quaternion_matches_scipy(set_name):
     q = SETS[set_name]
     R = Rotation.from_quat(q).as_matrix()
     expected = Rotation.from_matrix(R).as_quat(canonical=False)
-    ours = _call(rj.matrix_to_quaternion, R)
+    ours = padded_call(rj.matrix_to_quaternion, R)
     assert np.all(ours[..., 3] >= 0)
     assert_same_rotation(ours, expected, atol=4 * EPS64)
-    assert_close(_call(rj.quaternion_to_matrix, q), R, atol=4 * EPS64)
+    assert_close(padded_call(rj.quaternion_to_matrix, q), R, atol=4 * EPS64)
 
 
 @pytest.mark.parametrize("seq", SEQS)
 def test_euler_matches_scipy_generic(seq):
     q = random_quaternions(300, seed=2)
-    angles = _call(rj.quaternion_to_euler, q, seq)
+    angles = padded_call(rj.quaternion_to_euler, q, seq)
     expected = Rotation.from_quat(q).as_euler(seq)
     assert_close(angle_diff(angles, expected), 0, atol=1e-13)
     assert_close(
-        _call(rj.matrix_to_euler, Rotation.from_quat(q).as_matrix(), seq), angles, atol=1e-13
+        padded_call(rj.matrix_to_euler, Rotation.from_quat(q).as_matrix(), seq), angles, atol=1e-13
     )
     # two float64 implementations, each within a few ulp of exact (see the mpmath tests)
     R_expected = Rotation.from_euler(seq, expected).as_matrix()
-    assert_close(_call(rj.euler_to_matrix, expected, seq), R_expected, atol=10 * EPS64)
+    assert_close(padded_call(rj.euler_to_matrix, expected, seq), R_expected, atol=10 * EPS64)
     assert_same_rotation(
-        _call(rj.euler_to_quaternion, expected, seq),
+        padded_call(rj.euler_to_quaternion, expected, seq),
         Rotation.from_euler(seq, expected).as_quat(),
         atol=4 * EPS64,
     )
@@ -113,7 +100,7 @@ def test_euler_matches_scipy_generic(seq):
 @pytest.mark.parametrize("seq", SEQS)
 def test_euler_ranges(seq):
     q = np.concatenate([random_quaternions(300, seed=4), *SETS.values()])
-    a = _call(rj.quaternion_to_euler, q, seq)
+    a = padded_call(rj.quaternion_to_euler, q, seq)
     assert np.all(np.abs(a[:, [0, 2]]) <= np.pi)
     if is_proper(seq):
         assert np.all((a[:, 1] >= 0) & (a[:, 1] <= np.pi))
@@ -126,11 +113,15 @@ def test_digit_sequences_are_intrinsic(seq):
     letters = "".join("XYZ"[int(c) - 1] for c in seq)
     q = random_quaternions(20, seed=7)
     assert_close(
-        _call(rj.quaternion_to_euler, q, seq), _call(rj.quaternion_to_euler, q, letters), atol=0
+        padded_call(rj.quaternion_to_euler, q, seq),
+        padded_call(rj.quaternion_to_euler, q, letters),
+        atol=0,
     )
-    a = _call(rj.quaternion_to_euler, q, seq)
+    a = padded_call(rj.quaternion_to_euler, q, seq)
     assert_close(
-        _call(rj.euler_to_matrix, a, seq), Rotation.from_euler(letters, a).as_matrix(), atol=1e-15
+        padded_call(rj.euler_to_matrix, a, seq),
+        Rotation.from_euler(letters, a).as_matrix(),
+        atol=1e-15,
     )
 
 
@@ -143,10 +134,12 @@ EXACT_GRID = np.array(
 def test_exact_lock_grid_matches_scipy(seq):
     """624 quaternions with exact components, many of them exactly at gimbal lock: the angles
     equal scipy's (third angle 0 at lock) and reproduce the rotation."""
-    a = _call(rj.quaternion_to_euler, EXACT_GRID, seq)
+    a = padded_call(rj.quaternion_to_euler, EXACT_GRID, seq)
     assert_close(angle_diff(a, Rotation.from_quat(EXACT_GRID).as_euler(seq)), 0, atol=1e-15)
     assert_close(
-        _call(rj.euler_to_matrix, a, seq), Rotation.from_quat(EXACT_GRID).as_matrix(), atol=1e-15
+        padded_call(rj.euler_to_matrix, a, seq),
+        Rotation.from_quat(EXACT_GRID).as_matrix(),
+        atol=1e-15,
     )
 
 
@@ -155,8 +148,8 @@ def test_exact_lock_grid_matches_scipy(seq):
 def test_near_lock_round_trip_to_few_ulp(seq, offset):
     """Within 1e-9 of gimbal lock (and at it) the returned angles reproduce the matrix to a few
     ulp, where scipy's 1e-7 threshold moves the rotation by up to ~1e9 eps."""
-    R = _call(rj.euler_to_matrix, near_lock_angles(seq, offset), seq)
-    back = _call(rj.euler_to_matrix, _call(rj.matrix_to_euler, R, seq), seq)
+    R = padded_call(rj.euler_to_matrix, near_lock_angles(seq, offset), seq)
+    back = padded_call(rj.euler_to_matrix, padded_call(rj.matrix_to_euler, R, seq), seq)
     err = np.abs(back - R).max()
     assert err <= 6 * EPS64, f"{err / EPS64:.1f} eps"
     if offset == 1e-9:  # the threshold costs scipy far more (this documents the comparison)
@@ -176,11 +169,11 @@ def test_quaternion_matrix_accuracy_ulp(set_name, dtype):
     of the exact-arithmetic values, in float32 and float64."""
     eps = np.finfo(dtype).eps
     q = ACC_SETS[set_name].astype(dtype)
-    R = _call(rj.quaternion_to_matrix, q)
+    R = padded_call(rj.quaternion_to_matrix, q)
     assert R.dtype == dtype
     err_m = max(mp_max_diff(R[i].tolist(), mp_quat_to_matrix(q[i])) for i in range(len(q)))
     assert err_m <= 3 * eps, f"{err_m / eps:.2f} ulp"
-    q2 = _call(rj.matrix_to_quaternion, R)
+    q2 = padded_call(rj.matrix_to_quaternion, R)
     assert q2.dtype == dtype
     ref = np.array([mp_matrix_to_quaternion(R[i].astype(np.float64))[0] for i in range(len(q))])
     err_q = np.abs(q2 - ref).max()
@@ -194,10 +187,10 @@ def test_euler_backward_error_ulp(seq, dtype):
     input, exact arithmetic): <= 5 ulp in float64, <= 7 ulp in float32, on uniform,
     near-identity, near-180 and exact/near gimbal-lock inputs."""
     eps = np.finfo(dtype).eps
-    lock = _call(rj.euler_to_quaternion, near_lock_angles(seq, 1e-12, n=6), seq)
+    lock = padded_call(rj.euler_to_quaternion, near_lock_angles(seq, 1e-12, n=6), seq)
     q = np.concatenate([ACC_SETS["uniform"][:6], ACC_SETS["near_identity"][:3],
                         ACC_SETS["near_180"][:3], lock]).astype(dtype)  # fmt: skip
-    a = _call(rj.quaternion_to_euler, q, seq)
+    a = padded_call(rj.quaternion_to_euler, q, seq)
     assert a.dtype == dtype
     err = max(
         mp_max_diff(mp_euler_to_matrix(a[i], seq), mp_quat_to_matrix(q[i])) for i in range(len(q))
@@ -211,7 +204,7 @@ def test_euler_to_matrix_accuracy_ulp(seq, dtype):
     """euler_to_matrix within 5 ulp of the exact product of elementary rotations."""
     eps = np.finfo(dtype).eps
     a = np.random.default_rng(9).uniform(-4, 4, size=(10, 3)).astype(dtype)
-    R = _call(rj.euler_to_matrix, a, seq)
+    R = padded_call(rj.euler_to_matrix, a, seq)
     assert R.dtype == dtype
     err = max(mp_max_diff(R[i].tolist(), mp_euler_to_matrix(a[i], seq)) for i in range(len(a)))
     assert err <= 5 * eps, f"{err / eps:.2f} ulp"

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import SEQS, angle_diff, assert_close, random_quaternions
+from helpers import ORACLE_BATCH, SEQS, angle_diff, assert_close, random_quaternions
 from scipy.spatial.transform import Rotation
 
 import rotjax as rj
@@ -23,9 +23,6 @@ SCALES = {
 CASES = [(dt, s) for dt, scales in SCALES.items() for s in scales]
 IDS = [f"{np.dtype(dt).name}-{s:g}" for dt, s in CASES]
 
-# The batch size at which the Euler conversions are called per sequence and dtype in
-# tests/test_core_oracle.py and tests/test_bench.py: the same programs, compiled once.
-BATCH = 640
 
 Q = np.concatenate([random_quaternions(6, seed=41), [[0.0, 0, 0, 1], [0.0, 0.6, 0.8, 0]]])
 P = random_quaternions(8, seed=42)
@@ -220,7 +217,7 @@ def test_euler_angles_keep_a_small_rotation_next_to_a_tiny_factor(seq):
     for dtype, small, delta in ((np.float64, 1e-7, 2e-303), (np.float32, 1e-3, 1e-36)):
         pat = _abcd_patterns(seq)  # abcd = pat @ q
         q = (pat.T @ np.array([1.0, small, delta, 0.0]) / (pat[0] @ pat[0])).astype(dtype)
-        qs = np.broadcast_to(q, (BATCH, 4))  # the batch shape of tests/test_core_oracle.py
+        qs = np.broadcast_to(q, (ORACLE_BATCH, 4))  # the oracle tests' batch
         back = rj.euler_to_matrix(rj.quaternion_to_euler(qs, seq), seq)
         want = rj.quaternion_to_matrix(qs)
         assert_close(back, want, atol=8 * np.finfo(dtype).eps, err_msg=f"{dtype} {seq}")

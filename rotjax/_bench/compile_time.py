@@ -191,17 +191,9 @@ def markdown(doc) -> str:
 
 def generate(json_path, out_dir, check=False) -> list[str]:
     """Write (or, with ``check``, compare) ``out_dir/_generated/compile.md``; the stale paths."""
-    path = Path(json_path)
-    if not path.exists():
-        return []
-    text = markdown(json.loads(path.read_text()))
-    target = Path(out_dir) / "_generated" / "compile.md"
-    if target.exists() and target.read_text() == text:
-        return []
-    if not check:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_text(text)
-    return [str(target)]
+    from .report import generated_table
+
+    return generated_table(json_path, out_dir, "compile.md", markdown, check)
 
 
 def _meta() -> dict:
