@@ -191,7 +191,7 @@ def markdown(doc) -> str:
 
 def generate(json_path, out_dir, check=False) -> list[str]:
     """Write (or, with ``check``, compare) ``out_dir/_generated/compile.md``; the stale paths."""
-    from .report import generated_table
+    from .pipelines import generated_table
 
     return generated_table(json_path, out_dir, "compile.md", markdown, check)
 

@@ -352,10 +352,24 @@ def markdown(doc) -> str:
     return "\n".join(lines) + "\n"
 
 
+def generated_table(json_path, out_dir, name, markdown, check=False) -> list[str]:
+    """Write (or, with ``check``, compare) ``out_dir/_generated/name`` as ``markdown(doc)`` of the
+    JSON file ``json_path``, if that exists; the stale paths."""
+    path = Path(json_path)
+    if not path.exists():
+        return []
+    text = markdown(json.loads(path.read_text()))
+    target = Path(out_dir) / "_generated" / name
+    if target.exists() and target.read_text() == text:
+        return []
+    if not check:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(text)
+    return [str(target)]
+
+
 def generate(json_path, out_dir, check=False) -> list[str]:
     """Write (or, with ``check``, compare) ``out_dir/_generated/pipelines.md``; the stale paths."""
-    from .report import generated_table
-
     return generated_table(json_path, out_dir, "pipelines.md", markdown, check)
 
 

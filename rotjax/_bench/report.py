@@ -63,22 +63,6 @@ SPEED_RATIO_NOTE = (
 )
 
 
-def generated_table(json_path, out_dir, name, markdown, check=False) -> list[str]:
-    """Write (or, with ``check``, compare) ``out_dir/_generated/name`` as ``markdown(doc)`` of the
-    JSON file ``json_path``, if that exists; the stale paths."""
-    path = Path(json_path)
-    if not path.exists():
-        return []
-    text = markdown(json.loads(path.read_text()))
-    target = Path(out_dir) / "_generated" / name
-    if target.exists() and target.read_text() == text:
-        return []
-    if not check:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_text(text)
-    return [str(target)]
-
-
 def finite_or_none(x):
     """JSON has no inf/NaN: an infinite error (a NaN result) is written as null."""
     x = float(x)
