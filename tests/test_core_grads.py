@@ -1,6 +1,8 @@
 """Gradients: check_grads at generic points, and named regression tests at every singular point
 (identity, 180 degrees, zero rotation vector, gimbal lock of every sequence)."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -15,6 +17,7 @@ from helpers import (
     sweep,
     undecorated,
 )
+from jax.test_util import check_jvp, check_vjp
 
 import rotjax as rj
 from rotjax._euler import parse_seq
@@ -61,6 +64,77 @@ def _noisy_batch(seed):
     return R + np.array([0.0, 1e-3, 0.1])[:, None, None] * rng.normal(size=R.shape)
 
 
+# --- Euler programs shared by the tests of a sequence ---------------------------------------
+# Each Euler test of a sequence calls one compiled program per public function: its values,
+# jvp and vjp, for a batch of a fixed number of rows (the rows of an input, in batches padded
+# with copies of the first row). Compiling these programs is most of such a test's time; once
+# one test of a sequence has compiled them, its other tests and parameters run them as they are.
+
+# (euler_to_matrix's jvp compiles to a slower program for a batch than for one point)
+_ROWS = {"matrix_to_euler": 48, "quaternion_to_euler": 48, "euler_to_quaternion": 48}
+_EULER_OUT = {
+    "matrix_to_euler": (3,),
+    "quaternion_to_euler": (3,),
+    "euler_to_matrix": (3, 3),
+    "euler_to_quaternion": (4,),
+}
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _derivatives(f, x, dx, ct):
+    """``f(x)``, its jvp along ``dx`` and its vjp of ``ct``: one program."""
+    out, jv = jax.jvp(f, (x,), (dx,))
+    return out, jv, jax.vjp(f, x)[1](ct)[0]
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _euler_derivatives(name, seq, x, dx, ct):
+    return _derivatives(lambda v: getattr(rj, name)(v, seq), x, dx, ct)
+
+
+def _euler(name, seq, x, dx=None, ct=None):
+    """``rj.<name>(x, seq)`` for the rows of ``x`` (float64), through the shared program; with
+    ``dx``, also its jvp along ``dx`` and its vjp of ``ct`` (0 if not given), row by row."""
+    x = np.asarray(x, np.float64)
+    n, rows = len(x), _ROWS.get(name, 1)
+    values_only = dx is None
+    dx = np.zeros_like(x) if values_only else np.asarray(dx, np.float64)
+    ct = np.zeros((n, *_EULER_OUT[name])) if ct is None else np.asarray(ct, np.float64)
+    parts = []
+    for i in range(0, n, rows):
+        batch = [a[i : i + rows] for a in (x, dx, ct)]
+        k = len(batch[0])
+        batch = [
+            np.concatenate([a, np.broadcast_to(a[:1], (rows - k, *a.shape[1:]))]) for a in batch
+        ]
+        parts.append([np.asarray(o)[:k] for o in _euler_derivatives(name, seq, *batch)])
+    out, jv, vj = (np.concatenate(p) for p in zip(*parts, strict=True))
+    return out if values_only else (out, jv, vj)
+
+
+def _check_grads_euler(name, seq, x):
+    """``check_grads(lambda v: rj.<name>(v, seq), (x,), 1, modes=("fwd", "rev"))`` at one point
+    ``x``: the same checks (JAX's check_jvp and check_vjp: their random directions, finite
+    differences and tolerances), through the programs above."""
+    x = np.asarray(x, np.float64)
+
+    def f(v):
+        return _euler(name, seq, v[None])[0]
+
+    def f_jvp(primals, tangents):
+        out, jv, _ = _euler(name, seq, primals[0][None], tangents[0][None])
+        return out[0], jv[0]
+
+    def f_vjp(v):
+        def pull(ct):
+            return (_euler(name, seq, v[None], np.zeros_like(v)[None], ct[None])[2][0],)
+
+        return f(v), pull
+
+    check_jvp(f, f_jvp, (x,))
+    check_vjp(f, f_vjp, (x,))
+
+
 @pytest.mark.parametrize("name", sweep(sorted(MATRIX_FUNCTIONS), fast=["shepperd"]))
 def test_check_grads_matrix_functions_on_and_off_so3(name):
     """The derivative of the function computed, in every direction (check_grads draws random
@@ -80,17 +154,18 @@ def test_check_grads_matrix_to_euler_on_and_off_so3(seq, order):
 
 @pytest.mark.parametrize("seq", SEQS)
 def test_matrix_to_euler_derivative_on_and_off_so3_equals_finite_differences(seq):
-    """Every sequence, cheaply (one compiled jvp and vjp): forward mode equals central
+    """Every sequence, cheaply (the sequence's shared programs): forward mode equals central
     differences along random 3x3 directions, and reverse mode is its transpose."""
-    R = jnp.asarray(_noisy_batch(5))
-    dR = jnp.asarray(np.random.default_rng(6).normal(size=R.shape))
-    f = jax.jit(lambda m: rj.matrix_to_euler(m, seq))
-    _, jv = jax.jit(lambda m, d: jax.jvp(f, (m,), (d,)))(R, dR)
+    R = _noisy_batch(5)
+    dR = np.random.default_rng(6).normal(size=R.shape)
+    ct = np.random.default_rng(7).normal(size=(len(R), 3))
+    _, jv, g = _euler("matrix_to_euler", seq, R, dR, ct)
     h = 1e-6
-    assert_close(jv, angle_diff(f(R + h * dR), f(R - h * dR)) / (2 * h), atol=1e-6)
-    ct = jnp.asarray(np.random.default_rng(7).normal(size=jv.shape))
-    g = jax.jit(jax.grad(lambda m: jnp.sum(ct * f(m))))(R)
-    assert_close(jnp.sum(g * dR), jnp.sum(ct * jv), rtol=1e-12)
+    plus, minus = np.split(
+        _euler("matrix_to_euler", seq, np.concatenate([R + h * dR, R - h * dR])), 2
+    )
+    assert_close(jv, angle_diff(plus, minus) / (2 * h), atol=1e-6)
+    assert_close(np.sum(g * dR), np.sum(ct * jv), rtol=1e-12)
 
 
 def _symmetric_direction(R, seed):
@@ -149,21 +224,18 @@ def test_check_grads_of_hand_written_rules_off_the_unit_sphere(name, order):
 @pytest.mark.parametrize("seq", SEQS)
 def test_check_grads_euler_generic(seq):
     a = np.array([0.4, 1.1 if is_proper(seq) else 0.6, -2.0])
-    check_grads(lambda x: rj.euler_to_matrix(x, seq), (a,), 1, modes=("fwd", "rev"))
-    check_grads(lambda x: rj.euler_to_quaternion(x, seq), (a,), 1, modes=("fwd", "rev"))
-    q = np.asarray(rj.euler_to_quaternion(a, seq))
-    check_grads(lambda x: rj.quaternion_to_euler(x, seq), (q,), 1, modes=("fwd", "rev"))
-    R = np.asarray(rj.euler_to_matrix(a, seq))
-    for omega in OMEGAS:  # d angles along R omega^ equals the rate-map answer, by FD
-        dR = R @ np.asarray(hat(omega))
-        _, jvp = jax.jvp(
-            lambda m: rj.matrix_to_euler(m, seq), (jnp.asarray(R),), (jnp.asarray(dR),)
-        )
-        h = 1e-6
-        plus = rj.matrix_to_euler(R @ np.asarray(rj.rotvec_to_matrix(h * omega)), seq)
-        minus = rj.matrix_to_euler(R @ np.asarray(rj.rotvec_to_matrix(-h * omega)), seq)
-        fd = angle_diff(plus, minus) / (2 * h)
-        assert_close(jvp, fd, atol=1e-7)
+    _check_grads_euler("euler_to_matrix", seq, a)
+    _check_grads_euler("euler_to_quaternion", seq, a)
+    q = _euler("euler_to_quaternion", seq, a[None])[0]
+    _check_grads_euler("quaternion_to_euler", seq, q)
+    # d angles along R omega^ equals central differences along R exp(t omega^)
+    R = _euler("euler_to_matrix", seq, a[None])[0]
+    dR = R @ np.asarray(hat(OMEGAS))
+    _, jvp, _ = _euler("matrix_to_euler", seq, np.broadcast_to(R, dR.shape), dR)
+    h = 1e-6
+    steps = np.asarray(rj.rotvec_to_matrix(np.concatenate([h * OMEGAS, -h * OMEGAS])))
+    plus, minus = np.split(_euler("matrix_to_euler", seq, R @ steps), 2)
+    assert_close(jvp, angle_diff(plus, minus) / (2 * h), atol=1e-7)
 
 
 # --- exact derivatives at the identity / zero rotation vector --------------------------------
@@ -337,10 +409,10 @@ def _exact_lock_quaternion(seq, mid_index):
 
 def _lock_combination_sign(seq, angles):
     """s such that only a0 + s * a2 is defined at this lock, found from the forward map."""
-    R = np.asarray(rj.euler_to_matrix(angles, seq))
-    for s in (1.0, -1.0):
-        moved = angles + np.array([-s * 0.3, 0.0, 0.3])
-        if np.abs(np.asarray(rj.euler_to_matrix(moved, seq)) - R).max() < 1e-12:
+    moved = [angles + np.array([-s * 0.3, 0.0, 0.3]) for s in (1.0, -1.0)]
+    R, *R_moved = _euler("euler_to_matrix", seq, np.stack([angles, *moved]))
+    for s, Rs in zip((1.0, -1.0), R_moved, strict=True):
+        if np.abs(Rs - R).max() < 1e-12:
             return s
     raise AssertionError("not at gimbal lock")
 
@@ -350,25 +422,26 @@ def _lock_combination_sign(seq, angles):
 def test_euler_gradient_rule_at_exact_lock(seq, mid_index):
     """Exactly at lock: the third angle is 0; its derivative and the middle angle's are 0; the
     first angle's derivative is that of the defined combination a0 + s a2 (finite
-    differences of that smooth function through nearby non-locked points)."""
+    differences of that smooth function through nearby non-locked points). Both modes: the
+    Jacobian's columns are jvps along the four unit vectors, its rows vjps of the three."""
     q = _exact_lock_quaternion(seq, mid_index)
-    ang = np.asarray(rj.quaternion_to_euler(q, seq))
+    ang = _euler("quaternion_to_euler", seq, q[None])[0]
     assert ang[2] == 0.0
-    assert_close(rj.euler_to_matrix(ang, seq), rj.quaternion_to_matrix(q), atol=1e-15)
+    assert_close(
+        _euler("euler_to_matrix", seq, ang[None])[0], rj.quaternion_to_matrix(q), atol=1e-15
+    )
     s = _lock_combination_sign(seq, ang)
-    J = np.asarray(jax.jacrev(lambda x: rj.quaternion_to_euler(x, seq))(jnp.asarray(q)))
+    _, jv, vj = _euler("quaternion_to_euler", seq, np.tile(q, (4, 1)), np.eye(4), np.eye(4, 3))
+    J, Jf = vj[:3], jv.T  # reverse mode, forward mode
     assert np.all(np.isfinite(J))
     np.testing.assert_array_equal(J[1:], 0.0)
     assert np.abs(J[0]).max() > 0.1  # not a silent zero
 
-    def combo(x):
-        a = np.asarray(rj.quaternion_to_euler(x, seq))
-        return a[0] + s * a[2]
-
     h = 1e-7
-    fd = np.array([angle_diff(combo(q + h * e), combo(q - h * e)) / (2 * h) for e in np.eye(4)])
+    a = _euler("quaternion_to_euler", seq, np.concatenate([q + h * np.eye(4), q - h * np.eye(4)]))
+    combo_plus, combo_minus = np.split(a[:, 0] + s * a[:, 2], 2)
+    fd = angle_diff(combo_plus, combo_minus) / (2 * h)
     assert_close(J[0], fd, atol=1e-6)
-    Jf = np.asarray(jax.jacfwd(lambda x: rj.quaternion_to_euler(x, seq))(jnp.asarray(q)))
     assert_close(Jf, J, atol=1e-15)
 
 
@@ -377,26 +450,23 @@ def test_euler_gradients_near_lock_are_true_derivatives(seq):
     """1e-9 from lock the angles are differentiable; the derivative of the round trip
     R -> angles -> R is the identity on tangent vectors (values ~1e9 cancel correctly)."""
     mid = 1e-9 if is_proper(seq) else np.pi / 2 - 1e-9
-    R = np.asarray(rj.euler_to_matrix(np.array([0.4, mid, -1.3]), seq))
-    for omega in OMEGAS:
-        dR = R @ np.asarray(hat(omega))
-        _, jvp = jax.jvp(
-            lambda m: rj.euler_to_matrix(rj.matrix_to_euler(m, seq), seq),
-            (jnp.asarray(R),),
-            (jnp.asarray(dR),),
-        )
-        assert_close(jvp, dR, atol=1e-6 * max(1.0, 1.0))
-    g = jax.grad(lambda m: jnp.sum(rj.matrix_to_euler(m, seq)))(jnp.asarray(R))
+    R = _euler("euler_to_matrix", seq, np.array([[0.4, mid, -1.3]]))[0]
+    dR = R @ np.asarray(hat(OMEGAS))
+    Rs = np.broadcast_to(R, dR.shape)
+    # the chain rule through the two programs: d(euler_to_matrix)(angles; d angles)
+    ang, dang, g = _euler("matrix_to_euler", seq, Rs, dR, np.ones((len(dR), 3)))
+    _, jvp, _ = _euler("euler_to_matrix", seq, ang, dang)
+    assert_close(jvp, dR, atol=1e-6)
     assert np.all(np.isfinite(g))
 
 
-@pytest.mark.parametrize("seq", ["XYZ", "ZXZ", "zyx", "yzy"])
+@pytest.mark.parametrize("seq", SEQS)
 def test_euler_to_matrix_grads_at_lock(seq):
     """The forward map is smooth everywhere, gimbal lock included."""
     for mid in (0.0, np.pi) if is_proper(seq) else (np.pi / 2, -np.pi / 2):
         a = np.array([0.3, mid, 0.5])
-        check_grads(lambda x: rj.euler_to_matrix(x, seq), (a,), 1, modes=("fwd", "rev"))
-        check_grads(lambda x: rj.euler_to_quaternion(x, seq), (a,), 1, modes=("fwd", "rev"))
+        _check_grads_euler("euler_to_matrix", seq, a)
+        _check_grads_euler("euler_to_quaternion", seq, a)
 
 
 @pytest.mark.parametrize("which", ["_shepperd"])
@@ -589,41 +659,35 @@ def _euler_test_quaternions(seq):
     locks, and 180-degree rotations about each axis."""
     rng = np.random.default_rng(17)
     qs = list(rng.normal(size=(12, 4)) * np.exp(rng.uniform(-46, 46, size=(12, 1))))
-    for mid in (1e-9, np.pi - 1e-9) if is_proper(seq) else (np.pi / 2 - 1e-9, 1e-9 - np.pi / 2):
-        qs.append(np.asarray(rj.euler_to_quaternion(np.array([0.4, mid, -1.3]), seq)))
+    mids = (1e-9, np.pi - 1e-9) if is_proper(seq) else (np.pi / 2 - 1e-9, 1e-9 - np.pi / 2)
+    qs += list(_euler("euler_to_quaternion", seq, [[0.4, mid, -1.3] for mid in mids]))
     qs += [_exact_lock_quaternion(seq, i) for i in (0, 1)]
     qs += list(np.hstack([np.eye(3), np.zeros((3, 1))]))
-    return jnp.asarray(np.array(qs))
+    return np.array(qs)
 
 
-def _assert_rule_equals_autodiff(f, ref, seq, x, dx, rng, compiled=False, min_same=None):
-    """The custom jvp of ``f(x, seq)`` and its transpose equal JAX's own derivatives of
-    ``ref(x)``, the same code without the rule, row by row, relative to each row's size.
+def _assert_rule_equals_autodiff(rule, ref, x, dx, ct, min_same=None):
+    """The custom jvp of a public function and its transpose (``rule``: its values, jvp along
+    ``dx`` and vjp of ``ct``, row by row) equal JAX's own derivatives of ``ref``, the same code
+    without the rule (its jvp and vjp: one program), row by row, relative to each row's size.
 
-    ``compiled``: each derivative is one jitted program (else dispatched eagerly).
     ``min_same``: None, the two primals must be equal; else the rows whose primals differ by
     more than 1e-12 rad are left out, at most ``1 - min_same`` of them (JAX's jvp of the forward
     code rounds its primal differently, by an ulp or so; where that moves a point across a lock
     test, it differentiates another branch). Returns the rule's primal."""
-    g = lambda v: f(v, seq)  # noqa: E731
-    g_ref = ref
-    wrap = jax.jit if compiled else (lambda fn: fn)
-    out, jv = wrap(lambda v, d: jax.jvp(g, (v,), (d,)))(x, dx)
-    out_ref, jv_ref = wrap(lambda v, d: jax.jvp(g_ref, (v,), (d,)))(x, dx)
+    out, jv, gr = rule
+    out_ref, jv_ref, gr_ref = (np.asarray(a) for a in _derivatives(ref, x, dx, ct))
     if min_same is None:
         np.testing.assert_array_equal(out, out_ref)
         same = np.ones(out.shape[:-1], bool)
     else:
         same = np.abs(angle_diff(out, out_ref)).max(axis=-1) < 1e-12
         assert same.mean() > min_same, same
-    scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
+    scale = 1 + np.abs(jv_ref).max(axis=-1, keepdims=True)
     assert_close((jv / scale)[same], (jv_ref / scale)[same], atol=1e-14)
-    ct = jnp.asarray(rng.normal(size=out.shape) * same[..., None])
-    gr, gr_ref = (wrap(jax.grad(lambda v, h=h: jnp.sum(ct * h(v))))(x) for h in (g, g_ref))
-    assert np.all(np.isfinite(np.asarray(gr)))
+    assert np.all(np.isfinite(gr))
     row_axes = tuple(range(out.ndim - 1, x.ndim))
-    # (+ tiny: a left-out row has a zero cotangent, so both its gradients are 0)
-    scale = np.abs(np.asarray(gr_ref)).max(axis=row_axes, keepdims=True) + 1e-300
+    scale = np.abs(gr_ref).max(axis=row_axes, keepdims=True)
     assert_close((gr / scale)[same], (gr_ref / scale)[same], atol=1e-14)
     return out
 
@@ -634,23 +698,17 @@ def test_matrix_to_euler_rule_equals_autodiff_of_its_formula(seq):
     rule) and its transpose equal JAX's own derivative of the forward code: the matrices of
     quaternions of any norm, near and exactly at lock and at 180 degrees, scaled by 1e-20 to
     1e20, with noise, and random matrices."""
-    from rotjax._euler import _matrix_to_euler, _matrix_to_euler_parts
+    from rotjax._euler import _matrix_to_euler_parts
 
     rng = np.random.default_rng(23)
     R = np.asarray(rj.quaternion_to_matrix(_euler_test_quaternions(seq)))
     R = np.concatenate([R, R + 1e-3 * rng.normal(size=R.shape), rng.normal(size=(6, 3, 3))])
-    R = jnp.asarray(R * np.exp(rng.uniform(-46, 46, size=(len(R), 1, 1))))
-    dR = jnp.asarray(rng.normal(size=R.shape)) * jnp.abs(R).max(axis=(-2, -1), keepdims=True)
-    out = _assert_rule_equals_autodiff(
-        _matrix_to_euler,
-        undecorated(_matrix_to_euler_parts, seq, matrix=(0,)),
-        seq,
-        R,
-        dR,
-        rng,
-        compiled=True,
-        min_same=0.85,
-    )
+    R = R * np.exp(rng.uniform(-46, 46, size=(len(R), 1, 1)))
+    dR = rng.normal(size=R.shape) * np.abs(R).max(axis=(-2, -1), keepdims=True)
+    ct = rng.normal(size=(len(R), 3))
+    rule = _euler("matrix_to_euler", seq, R, dR, ct)
+    ref = undecorated(_matrix_to_euler_parts, seq, matrix=(0,))
+    out = _assert_rule_equals_autodiff(rule, ref, R, dR, ct, min_same=0.85)
     assert_close(angle_diff(out, rj.matrix_to_euler(R, seq)), 0, atol=1e-15)  # the forward's
 
 
@@ -665,13 +723,16 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
 
     q = _euler_test_quaternions(seq)
     rng = np.random.default_rng(5)
-    dq = jnp.asarray(rng.normal(size=q.shape)) * jnp.linalg.norm(q, axis=-1, keepdims=True)
-    _assert_rule_equals_autodiff(_quat_to_euler, ref, seq, q, dq, rng)
-    # second derivatives, compiled once for both points: generic, exact lock
+    dq = rng.normal(size=q.shape) * np.linalg.norm(q, axis=-1, keepdims=True)
+    ct = rng.normal(size=(len(q), 3))
+    rule = _euler("quaternion_to_euler", seq, q, dq, ct)
+    _assert_rule_equals_autodiff(rule, ref, q, dq, ct)
+    # second derivatives, compiled once for both points: generic, exact lock (the rule's by
+    # JAX's hessian, forward over reverse; the reference's forward over forward)
     hess = jax.jit(jax.hessian(lambda x: _quat_to_euler(x, seq)))
-    hess_ref = jax.jit(jax.hessian(ref))
-    for x in (q[0] / jnp.linalg.norm(q[0]), q[-4]):
-        h, h_ref = hess(x), hess_ref(x)
+    hess_ref = jax.jit(jax.jacfwd(jax.jacfwd(ref)))
+    for x in (q[0] / np.linalg.norm(q[0]), q[-4]):
+        h, h_ref = hess(jnp.asarray(x)), hess_ref(jnp.asarray(x))
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
 
 
