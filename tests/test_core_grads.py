@@ -11,7 +11,6 @@ from helpers import (
     SEQS,
     angle_diff,
     assert_close,
-    check_grads,
     is_proper,
     random_quaternions,
     sweep,
@@ -64,6 +63,55 @@ def _noisy_batch(seed):
     return R + np.array([0.0, 1e-3, 0.1])[:, None, None] * rng.normal(size=R.shape)
 
 
+# --- check_grads, each program compiled once per function ---------------------------------
+
+
+@functools.cache
+def _check_programs(f, path):
+    """The function that ``helpers.check_grads`` checks after the steps ``path`` ("fwd": its
+    jvp, "rev": its vjp of its own output) from ``f``, and its jitted value, jvp and vjp: kept,
+    so that a check of the same ``f`` (at another point of the same shapes, at another order,
+    by another test) runs them as they are."""
+    if not path:
+        g = f
+    else:
+        parent = _check_programs(f, path[:-1])[0]
+        if path[-1] == "fwd":
+            g = functools.partial(jax.jvp, parent)
+        else:
+
+            def g(*a):
+                out, vjp = jax.vjp(parent, *a)
+                return vjp(out)
+
+    pull = jax.jit(lambda a, ct: jax.vjp(g, *a)[1](ct))
+    return g, jax.jit(g), jax.jit(functools.partial(jax.jvp, g)), pull
+
+
+def _check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps=None):
+    """``helpers.check_grads``: the same checks (JAX's check_jvp and check_vjp, the same random
+    directions, finite differences and tolerances), each program jitted once per function
+    (``_check_programs``)."""
+    eps = eps or 1e-4  # check_grads' default step
+
+    def check(path, args, order, err_msg):
+        _, fj, jvp, pull = _check_programs(f, path)
+        if "fwd" in modes:
+            msg = f"JVP of {err_msg}" if err_msg else "JVP"
+            check_jvp(fj, jvp, args, atol, rtol, eps, msg)
+            if order > 1:
+                check((*path, "fwd"), (args, args), order - 1, msg)
+        if "rev" in modes:
+            msg = f"VJP of {err_msg}" if err_msg else "VJP"
+            check_vjp(
+                fj, lambda *a: (fj(*a), functools.partial(pull, a)), args, atol, rtol, eps, msg
+            )
+            if order > 1:
+                check((*path, "rev"), args, order - 1, msg)
+
+    check((), tuple(args), order, "")
+
+
 # --- Euler programs shared by the tests of a sequence ---------------------------------------
 # Each Euler test of a sequence calls one compiled program per public function: its values,
 # jvp and vjp, for a batch of a fixed number of rows (the rows of an input, in batches padded
@@ -112,22 +160,25 @@ def _euler(name, seq, x, dx=None, ct=None):
     return out if values_only else (out, jv, vj)
 
 
-def _check_grads_euler(name, seq, x):
+def _check_grads_euler(name, seq, x, batch=False):
     """``check_grads(lambda v: rj.<name>(v, seq), (x,), 1, modes=("fwd", "rev"))`` at one point
-    ``x``: the same checks (JAX's check_jvp and check_vjp: their random directions, finite
-    differences and tolerances), through the programs above."""
+    ``x`` (``batch``: at a batch of points, rows of ``x``): the same checks (JAX's check_jvp and
+    check_vjp: their random directions, finite differences and tolerances), through the shared
+    program."""
     x = np.asarray(x, np.float64)
+    rows = (lambda v: v) if batch else (lambda v: v[None])
+    first = (lambda v: v) if batch else (lambda v: v[0])
 
     def f(v):
-        return _euler(name, seq, v[None])[0]
+        return first(_euler(name, seq, rows(v)))
 
     def f_jvp(primals, tangents):
-        out, jv, _ = _euler(name, seq, primals[0][None], tangents[0][None])
-        return out[0], jv[0]
+        out, jv, _ = _euler(name, seq, rows(primals[0]), rows(tangents[0]))
+        return first(out), first(jv)
 
     def f_vjp(v):
         def pull(ct):
-            return (_euler(name, seq, v[None], np.zeros_like(v)[None], ct[None])[2][0],)
+            return (first(_euler(name, seq, rows(v), rows(np.zeros_like(v)), rows(ct))[2]),)
 
         return f(v), pull
 
@@ -139,7 +190,7 @@ def _check_grads_euler(name, seq, x):
 def test_check_grads_matrix_functions_on_and_off_so3(name):
     """The derivative of the function computed, in every direction (check_grads draws random
     3x3 directions), to second order, in both modes."""
-    check_grads(MATRIX_FUNCTIONS[name], (_noisy_batch(3),), order=2, modes=("fwd", "rev"))
+    _check_grads(MATRIX_FUNCTIONS[name], (_noisy_batch(3),), order=2, modes=("fwd", "rev"))
 
 
 # Order 2 is slow: its rule's second derivatives are compared with JAX's of the forward code
@@ -148,8 +199,11 @@ def test_check_grads_matrix_functions_on_and_off_so3(name):
 @pytest.mark.parametrize("order", sweep([1, 2], fast=[1]))
 @pytest.mark.parametrize("seq", sweep(["ZXZ", "xyz"], fast=["xyz"]))
 def test_check_grads_matrix_to_euler_on_and_off_so3(seq, order):
-    f = lambda m: rj.matrix_to_euler(m, seq)  # noqa: E731
-    check_grads(f, (_noisy_batch(4),), order=order, modes=("fwd", "rev"))
+    if order == 1:  # through the sequence's shared program
+        _check_grads_euler("matrix_to_euler", seq, _noisy_batch(4), batch=True)
+    else:
+        f = lambda m: rj.matrix_to_euler(m, seq)  # noqa: E731
+        _check_grads(f, (_noisy_batch(4),), order=order, modes=("fwd", "rev"))
 
 
 @pytest.mark.parametrize("seq", SEQS)
@@ -181,10 +235,23 @@ def test_derivative_along_symmetric_directions_equals_finite_differences(name):
     """Along R @ S the function moves (except "optimal", whose nearest rotation stays R to first
     order, and "markley", within O(sigma^2) of it): the jvp is the central difference, not a
     projected surrogate (0)."""
-    f = MATRIX_FUNCTIONS.get(name) or (lambda m: rj.matrix_to_euler(m, name[-3:]))
+    if name in MATRIX_FUNCTIONS:
+        f = MATRIX_FUNCTIONS[name]
+
+        def jvp_of(R, dR):
+            return jax.jvp(f, (jnp.asarray(R),), (jnp.asarray(dR),))[1]
+    else:  # matrix_to_euler: the sequence's shared program
+        seq = name[-3:]
+
+        def f(m):
+            return _euler("matrix_to_euler", seq, m[None])[0]
+
+        def jvp_of(R, dR):
+            return _euler("matrix_to_euler", seq, R[None], dR[None])[1][0]
+
     for k, R in enumerate([np.asarray(rj.quaternion_to_matrix(q)) for q in Q] + [np.eye(3)]):
         dR = _symmetric_direction(R, k)
-        _, jvp = jax.jvp(f, (jnp.asarray(R),), (jnp.asarray(dR),))
+        jvp = jvp_of(R, dR)
         h = 1e-6
         fd = (np.asarray(f(R + h * dR)) - np.asarray(f(R - h * dR))) / (2 * h)
         assert_close(jvp, fd, atol=1e-7)
@@ -195,7 +262,7 @@ def test_derivative_along_symmetric_directions_equals_finite_differences(name):
 @pytest.mark.parametrize("name", sweep(sorted(GENERIC), fast=sorted(GENERIC)[::3]))
 def test_check_grads_generic(name):
     f, x = GENERIC[name]
-    check_grads(f, (x,), order=1, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
+    _check_grads(f, (x,), order=1, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
 
 
 RULES = {
@@ -218,7 +285,7 @@ def test_check_grads_of_hand_written_rules_off_the_unit_sphere(name, order):
     unit sphere, where the rule must still be the derivative of the code) and on it: first
     and second order, both modes (quaternion_apply in both arguments through one input)."""
     q = np.concatenate([Q[:2] * 0.3, Q[2:] * 4.0, Q[:1]])
-    check_grads(RULES[name], (q,), order=order, modes=("fwd", "rev"))
+    _check_grads(RULES[name], (q,), order=order, modes=("fwd", "rev"))
 
 
 @pytest.mark.parametrize("seq", SEQS)
@@ -265,15 +332,15 @@ def test_rotvec_to_matrix_jacobian_at_zero_is_hat():
 def test_exp_log_near_zero_match_finite_differences(scale):
     """Where the Taylor branch meets the closed form the derivatives agree with FD."""
     v = scale * np.array([0.3, -0.5, 0.8])
-    check_grads(rj.rotvec_to_quaternion, (v,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
-    check_grads(rj.rotvec_to_matrix, (v,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
+    _check_grads(rj.rotvec_to_quaternion, (v,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
+    _check_grads(rj.rotvec_to_matrix, (v,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
     q = np.asarray(rj.rotvec_to_quaternion(v))
-    check_grads(rj.quaternion_to_rotvec, (q,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
+    _check_grads(rj.quaternion_to_rotvec, (q,), 1, modes=("fwd", "rev"), eps=scale * 1e-3)
 
 
 def test_quaternion_to_matrix_grads_at_identity_and_180():
     for q in [np.array([0.0, 0, 0, 1]), np.array([1.0, 0, 0, 0]), np.array([0.0, 0.6, 0.8, 0])]:
-        check_grads(rj.quaternion_to_matrix, (q,), 2, modes=("fwd", "rev"))
+        _check_grads(rj.quaternion_to_matrix, (q,), 2, modes=("fwd", "rev"))
 
 
 # --- matrix -> quaternion on SO(3): tangent directions ---------------------------------------
@@ -529,12 +596,21 @@ def test_apply_hand_written_derivative_equals_autodiff_of_its_formula():
         np.testing.assert_array_equal(out, out_ref)
         assert jv.dtype == dtype and rel(jv, jv_ref).max() < tol
         ct = jnp.asarray(rng.normal(size=out.shape), dtype)
+        grad, grad_ref = (
+            jit(jax.grad(lambda a, b, c, fn=fn: jnp.sum(c * fn(a, b)), (0, 1)))
+            for fn in (_apply, ref)
+        )
         for qq in (qd, qd[:1]):  # one quaternion broadcast against every vector
-            g = jit(jax.grad(lambda a, b: jnp.sum(ct * _apply(a, b)), (0, 1)))(qq, vd)
-            g_ref = jit(jax.grad(lambda a, b: jnp.sum(ct * ref(a, b)), (0, 1)))(qq, vd)
+            g, g_ref = grad(qq, vd, ct), grad_ref(qq, vd, ct)
             for x, x_ref in zip(g, g_ref, strict=True):
                 assert x.shape == x_ref.shape and np.all(np.isfinite(np.asarray(x)))
                 assert rel(x, x_ref).max() < tol * (10 if qq.shape[0] == 1 else 1)
+        # no rotation (zero or not finite q, in the first rows): NaN derivative, as JAX's
+        bad = jnp.asarray([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]], dtype)
+        qb, ones = qd.at[:3].set(bad), jnp.ones_like(vd)
+        g, g_ref = grad(qb, ones, jnp.ones_like(ct))[0], grad_ref(qb, ones, jnp.ones_like(ct))[0]
+        np.testing.assert_array_equal(np.isnan(g), np.isnan(g_ref))
+        assert np.all(np.isnan(g[:3])) and not np.any(np.isnan(g[3:]))
     hess, hess_ref = (jit(jax.hessian(fn, (0, 1))) for fn in (_apply, ref))
     for i in (0, 1, 5):
         h, h_ref = (
@@ -543,11 +619,6 @@ def test_apply_hand_written_derivative_equals_autodiff_of_its_formula():
         )
         for x, x_ref in zip(jax.tree.leaves(h), jax.tree.leaves(h_ref), strict=True):
             assert_close(x, x_ref, atol=1e-13 * (1 + float(jnp.abs(x_ref).max())))
-    bad = jnp.array([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]])
-    vb = jnp.ones((3, 3))
-    g = jax.grad(lambda a: jnp.sum(_apply(a, vb)))(bad)
-    g_ref = jax.grad(lambda a: jnp.sum(ref(a, vb)))(bad)
-    np.testing.assert_array_equal(np.isnan(g), np.isnan(g_ref))
 
 
 def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
@@ -584,6 +655,11 @@ def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
 
 
+@functools.partial(jax.jit, static_argnums=0)
+def _vmap_grad(f, u):
+    return jax.vmap(jax.grad(f))(u)
+
+
 @pytest.mark.parametrize("which", ["rotvec", "mrp"])
 def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
     """The custom jvp of quaternion_to_rotvec and quaternion_to_mrp (one rule, for `k q_v`;
@@ -618,8 +694,11 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
     scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
     assert_close(jv / scale, jv_ref / scale, atol=1e-14)
     ct = jnp.asarray(rng.normal(size=out.shape))
-    g = jit(jax.grad(lambda x: jnp.sum(ct * _quat_to_rotvec(x))))(q)
-    g_ref = jit(jax.grad(lambda x: jnp.sum(ct * _quat_to_rotvec.fun(x))))(q)
+    grad, grad_ref = (
+        jit(jax.grad(lambda x, c, fn=fn: jnp.sum(c * fn(x))))
+        for fn in (_quat_to_rotvec, _quat_to_rotvec.fun)
+    )
+    g, g_ref = grad(q, ct), grad_ref(q, ct)
     assert np.all(np.isfinite(np.asarray(g)))
     scale = np.abs(np.asarray(g_ref)).max(axis=-1, keepdims=True)
     assert_close(g / scale, g_ref / scale, atol=1e-14)
@@ -629,15 +708,15 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
     u = jnp.linspace(0.0, 1.0, 257)
     for dtype, tol in ((jnp.float64, 1e-15), (jnp.float32, 1e-6)):
-        d = jax.vmap(jax.grad(_atan_ratio))(u.astype(dtype))
-        d_ref = jax.vmap(jax.grad(_atan_ratio.fun))(u.astype(dtype))
+        d = _vmap_grad(_atan_ratio, u.astype(dtype))
+        d_ref = _vmap_grad(_atan_ratio.fun, u.astype(dtype))
         assert d.dtype == dtype
         assert_close(d, d_ref, atol=tol)
-    # no rotation: NaN derivative, as JAX's of the forward code
-    bad = jnp.array([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]])
-    g = jax.grad(lambda x: jnp.sum(_quat_to_rotvec(x)))(bad)
-    g_ref = jax.grad(lambda x: jnp.sum(_quat_to_rotvec.fun(x)))(bad)
+    # no rotation (zero or not finite q, in the first rows): NaN derivative, as JAX's
+    qb = q.at[:3].set(jnp.array([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]]))
+    g, g_ref = grad(qb, jnp.ones_like(ct)), grad_ref(qb, jnp.ones_like(ct))
     np.testing.assert_array_equal(np.isnan(g), np.isnan(g_ref))
+    assert np.all(np.isnan(g[:3])) and not np.any(np.isnan(g[3:]))
 
 
 @pytest.mark.parametrize("method", ["shepperd", "markley", "optimal"])
