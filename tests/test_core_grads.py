@@ -113,6 +113,9 @@ def _check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps
 
 
 # --- Euler programs shared by the tests of a sequence ---------------------------------------
+# (The tests parametrized over SEQS take the sequence with module scope: pytest runs the tests
+# of one sequence one after another, so that xdist's workers split the sequences between them,
+# not the tests of one sequence.)
 # Each Euler test of a sequence calls one compiled program per public function: its values,
 # jvp and vjp, for a batch of a fixed number of rows (the rows of an input, in batches padded
 # with copies of the first row). Compiling these programs is most of such a test's time; once
@@ -206,7 +209,7 @@ def test_check_grads_matrix_to_euler_on_and_off_so3(seq, order):
         _check_grads(f, (_noisy_batch(4),), order=order, modes=("fwd", "rev"))
 
 
-@pytest.mark.parametrize("seq", SEQS)
+@pytest.mark.parametrize("seq", SEQS, scope="module")
 def test_matrix_to_euler_derivative_on_and_off_so3_equals_finite_differences(seq):
     """Every sequence, cheaply (the sequence's shared programs): forward mode equals central
     differences along random 3x3 directions, and reverse mode is its transpose."""
@@ -288,7 +291,7 @@ def test_check_grads_of_hand_written_rules_off_the_unit_sphere(name, order):
     _check_grads(RULES[name], (q,), order=order, modes=("fwd", "rev"))
 
 
-@pytest.mark.parametrize("seq", SEQS)
+@pytest.mark.parametrize("seq", SEQS, scope="module")
 def test_check_grads_euler_generic(seq):
     a = np.array([0.4, 1.1 if is_proper(seq) else 0.6, -2.0])
     _check_grads_euler("euler_to_matrix", seq, a)
@@ -485,7 +488,7 @@ def _lock_combination_sign(seq, angles):
 
 
 @pytest.mark.parametrize("mid_index", [0, 1], ids=["lock_a", "lock_b"])
-@pytest.mark.parametrize("seq", SEQS)
+@pytest.mark.parametrize("seq", SEQS, scope="module")
 def test_euler_gradient_rule_at_exact_lock(seq, mid_index):
     """Exactly at lock: the third angle is 0; its derivative and the middle angle's are 0; the
     first angle's derivative is that of the defined combination a0 + s a2 (finite
@@ -512,7 +515,7 @@ def test_euler_gradient_rule_at_exact_lock(seq, mid_index):
     assert_close(Jf, J, atol=1e-15)
 
 
-@pytest.mark.parametrize("seq", SEQS)
+@pytest.mark.parametrize("seq", SEQS, scope="module")
 def test_euler_gradients_near_lock_are_true_derivatives(seq):
     """1e-9 from lock the angles are differentiable; the derivative of the round trip
     R -> angles -> R is the identity on tangent vectors (values ~1e9 cancel correctly)."""
@@ -527,7 +530,7 @@ def test_euler_gradients_near_lock_are_true_derivatives(seq):
     assert np.all(np.isfinite(g))
 
 
-@pytest.mark.parametrize("seq", SEQS)
+@pytest.mark.parametrize("seq", SEQS, scope="module")
 def test_euler_to_matrix_grads_at_lock(seq):
     """The forward map is smooth everywhere, gimbal lock included."""
     for mid in (0.0, np.pi) if is_proper(seq) else (np.pi / 2, -np.pi / 2):
@@ -771,7 +774,7 @@ def _assert_rule_equals_autodiff(rule, ref, x, dx, ct, min_same=None):
     return out
 
 
-@pytest.mark.parametrize("seq", SEQS)
+@pytest.mark.parametrize("seq", SEQS, scope="module")
 def test_matrix_to_euler_rule_equals_autodiff_of_its_formula(seq):
     """matrix_to_euler's custom jvp (the Shepperd column's derivative, then quaternion_to_euler's
     rule) and its transpose equal JAX's own derivative of the forward code: the matrices of
@@ -791,7 +794,7 @@ def test_matrix_to_euler_rule_equals_autodiff_of_its_formula(seq):
     assert_close(angle_diff(out, rj.matrix_to_euler(R, seq)), 0, atol=1e-15)  # the forward's
 
 
-@pytest.mark.parametrize("seq", SEQS)
+@pytest.mark.parametrize("seq", SEQS, scope="module")
 def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     """quaternion_to_euler's custom jvp (and its transpose) equals JAX's own derivative of the
     forward code, everywhere: generic points of any norm, near and exactly at lock (where the
