@@ -13,18 +13,18 @@ from jax.typing import ArrayLike, DTypeLike
 
 from ._numerics import (
     FULL,
-    _check_static,
     as_float,
     cast,
     check_shape,
+    check_static,
     from_scalar_last,
     like_rank,
     matmul,
     public,
     to_scalar_last,
 )
-from ._quaternion import _multiply, _normalize
-from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
+from ._quaternion import quat_multiply, quat_normalize
+from ._rotvec import quat_to_rotvec, rotvec_to_quat
 
 
 def _canonical(q):
@@ -106,8 +106,8 @@ def quaternion_power(q: ArrayLike, n: ArrayLike, scalar_first: bool = False) -> 
     (q, n), dt = as_float(q, n)
     check_shape(q, (4,), "q")
     q = to_scalar_last(q, scalar_first)
-    v = _quat_to_rotvec(q)
-    out = _rotvec_to_quat(like_rank(n, v[..., 0])[..., None] * v)
+    v = quat_to_rotvec(q)
+    out = rotvec_to_quat(like_rank(n, v[..., 0])[..., None] * v)
     return cast(from_scalar_last(out, scalar_first), dt)
 
 
@@ -228,7 +228,7 @@ def rotation_group(
     """
     if dtype is not None and not jnp.issubdtype(dtype, jnp.floating):
         raise TypeError(f"dtype must be real (a floating dtype), got {jnp.dtype(dtype)}")
-    scalar_first = _check_static("scalar_first", scalar_first)
+    scalar_first = check_static("scalar_first", scalar_first)
     q = jnp.asarray(_group(group, axis), dtype=dtype if dtype is not None else float)
     return from_scalar_last(q, scalar_first)
 
@@ -275,7 +275,7 @@ def quaternion_reduce(
     """
     arrays = [x for x in (q, left, right) if x is not None]
     conv, dt = as_float(*arrays)
-    q = _normalize(to_scalar_last(conv[0], scalar_first))
+    q = quat_normalize(to_scalar_last(conv[0], scalar_first))
     check_shape(q, (4,), "q")
     rest = list(conv[1:])
     one = jnp.asarray([[0.0, 0.0, 0.0, 1.0]], dtype=q.dtype)
@@ -293,10 +293,10 @@ def quaternion_reduce(
     L, M = lg.shape[0], rg.shape[0]
     # All products l_i * q * r_j, shape (..., L, M, 4).
     batch = q.shape[:-1]
-    qr = _multiply(  # (..., M, 4); broadcasting made explicit (no rank promotion)
+    qr = quat_multiply(  # (..., M, 4); broadcasting made explicit (no rank promotion)
         jnp.broadcast_to(q[..., None, :], batch + (M, 4)), jnp.broadcast_to(rg, batch + (M, 4))
     )
-    prod = _multiply(  # (..., L, M, 4)
+    prod = quat_multiply(  # (..., L, M, 4)
         jnp.broadcast_to(lg[:, None, :], batch + (L, M, 4)),
         jnp.broadcast_to(qr[..., None, :, :], batch + (L, M, 4)),
     )

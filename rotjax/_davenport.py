@@ -6,11 +6,11 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._euler import _quat_to_euler
-from ._matrix import _from_matrix
+from ._euler import quat_to_euler
+from ._matrix import quat_from_matrix
 from ._numerics import as_float, cast, check_shape, cross, from_scalar_last, public, to_scalar_last
-from ._quaternion import _conjugate, _multiply
-from ._rotvec import _rotvec_to_quat
+from ._quaternion import quat_conjugate, quat_multiply
+from ._rotvec import rotvec_to_quat
 
 ORDERS = {"e": True, "extrinsic": True, "i": False, "intrinsic": False}
 
@@ -83,8 +83,8 @@ def davenport_to_quaternion(
     bad = jnp.any(jnp.abs(jnp.sum(unit[..., :-1, :] * unit[..., 1:, :], axis=-1)) > 1e-7, axis=-1)
     q = None
     for i in range(k):
-        qi = _rotvec_to_quat(angles[..., i, None] * unit[..., i, :])
-        q = qi if q is None else (_multiply(qi, q) if extrinsic else _multiply(q, qi))
+        qi = rotvec_to_quat(angles[..., i, None] * unit[..., i, :])
+        q = qi if q is None else (quat_multiply(qi, q) if extrinsic else quat_multiply(q, qi))
     q = jnp.where(bad[..., None], jnp.nan, q)
     return cast(from_scalar_last(q, scalar_first), dt)
 
@@ -153,11 +153,11 @@ def quaternion_to_davenport(
     m2 = jnp.where(flip[..., None], -m2, m2)
     c = jnp.where(flip[..., None], -c, c)
     lam = jnp.where(flip, -lam, lam)
-    qb = _from_matrix(jnp.stack([m1, m2, c], axis=-1), "shepperd")  # columns: a rotation
+    qb = quat_from_matrix(jnp.stack([m1, m2, c], axis=-1), "shepperd")  # columns: a rotation
     z = jnp.zeros_like(lam)
     qy = jnp.stack([z, jnp.sin(-lam / 2), z, jnp.cos(-lam / 2)], axis=-1)
-    qp = _multiply(_multiply(_multiply(_conjugate(qb), q), qb), qy)
-    ang = _quat_to_euler(qp, "XYX")
+    qp = quat_multiply(quat_multiply(quat_multiply(quat_conjugate(qb), q), qb), qy)
+    ang = quat_to_euler(qp, "XYX")
     mid = ang[..., 1] + lam
     ang = jnp.stack([ang[..., 0], jnp.where(flip, -mid, mid), ang[..., 2]], axis=-1)
     if extrinsic:

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 
 from ._elementary import rsqrt
 from ._numerics import TIE_ULPS, eps, max_abs, safe_div, select
-from ._quaternion import _multiply, _to_matrix
+from ._quaternion import quat_multiply, quat_to_matrix
 from ._shepperd import k4_columns, masks_once, select_column
 
 # One-sided Jacobi converges quadratically (Hestenes 1958; Demmel & Veselic 1992). The sweep
@@ -46,7 +46,7 @@ _SWEEPS = {jnp.dtype(jnp.float32): 4, jnp.dtype(jnp.float64): 5}
 _PAIRS = ((0, 1), (0, 2), (1, 2))
 
 # The most entries per batch element whose maximum pow2_scale takes elementwise.
-_UNROLL_MAX = 64
+UNROLL_MAX = 64
 # Batch elements per chunk on the CPU: a chunk's Jacobi state (18 numbers a matrix, a few
 # copies live at once) stays in the last-level cache between the rotations, and each chunk
 # costs a fixed overhead (one call per loop of the kernel, about 60 loops), so the chunk is as
@@ -94,7 +94,7 @@ def pow2_factors(x, axes):
     if sorted(a % x.ndim for a in axes) != list(range(x.ndim - n, x.ndim)):
         raise ValueError(f"axes must be the trailing axes, got {axes} for shape {x.shape}")
     flat = x.reshape(*x.shape[: x.ndim - n], -1)
-    if flat.shape[-1] <= _UNROLL_MAX:
+    if flat.shape[-1] <= UNROLL_MAX:
         # Elementwise maxima fuse with their neighbours and keep NaN (a max reduction over a
         # small axis is a loop of its own; with NaN made infinite first, a slow one).
         m = max_abs(*(flat[..., i] for i in range(flat.shape[-1])))
@@ -302,7 +302,7 @@ def _nearest(B, nan_at_zero=True):
 @jax.custom_jvp
 def _top_matrix(B, q, aux, Q):
     """`Q`, the rotation of `_top(B, q, aux)` computed by the kernel, differentiated as
-    `_to_matrix(_top(B, q, aux))`."""
+    `quat_to_matrix(_top(B, q, aux))`."""
     del B, q, aux
     return Q
 
@@ -310,7 +310,7 @@ def _top_matrix(B, q, aux, Q):
 @_top_matrix.defjvp
 def _top_matrix_jvp(primals, tangents):
     (B, q, aux, _), (dB, _, _, _) = primals, tangents
-    return jax.jvp(lambda b: _to_matrix(_top(b, q, aux)), (B,), (dB,))
+    return jax.jvp(lambda b: quat_to_matrix(_top(b, q, aux)), (B,), (dB,))
 
 
 def nearest_rotation(B):
@@ -356,7 +356,7 @@ def _top_jvp(primals, tangents):
     V, s = aux
     Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor
     v = _top(B, qe, aux)
-    Q = _to_matrix(v)
+    Q = quat_to_matrix(v)
 
     def qt(X, i, j):
         """`(Q^T X)_ij` as a sum of per-element terms: XLA:CPU compiles a reduction over a
@@ -384,7 +384,7 @@ def _top_jvp(primals, tangents):
 
     y = Y(r)
     half_w = [y[i] - 0.5 * z for i, z in enumerate(Y(A(y)))]  # (2 y - Y A y) / 2
-    dv = _multiply(v, jnp.stack([*half_w, jnp.zeros_like(tr)], axis=-1))
+    dv = quat_multiply(v, jnp.stack([*half_w, jnp.zeros_like(tr)], axis=-1))
     return v, dv  # v, not the constant q: its derivative is the next order's
 
 

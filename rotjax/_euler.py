@@ -11,7 +11,7 @@ from jax import Array
 from jax.typing import ArrayLike
 
 from ._elementary import atan2, rsqrt, scaled_pair, sin_cos
-from ._matrix import _column_tangent, _selected_column
+from ._matrix import column_tangent, selected_column
 from ._numerics import (
     as_float,
     cast,
@@ -25,7 +25,7 @@ from ._numerics import (
     to_scalar_last,
     unstack,
 )
-from ._quaternion import _multiply, _to_matrix
+from ._quaternion import quat_multiply, quat_to_matrix
 from ._shepperd import entries
 
 _VALID = (
@@ -84,7 +84,11 @@ def _euler_to_quat(a, seq):
     axes, intrinsic = parse_seq(seq)
     q0, q1, q2 = (_elementary(ax, a[..., n]) for n, ax in enumerate(axes))
     # intrinsic: R = R_0 R_1 R_2 (rotating axes); extrinsic: R = R_2 R_1 R_0 (fixed axes)
-    return _multiply(_multiply(q0, q1), q2) if intrinsic else _multiply(_multiply(q2, q1), q0)
+    return (
+        quat_multiply(quat_multiply(q0, q1), q2)
+        if intrinsic
+        else quat_multiply(quat_multiply(q2, q1), q0)
+    )
 
 
 def _lifted(u, v):
@@ -196,7 +200,7 @@ def _substitute(abcd, locks):
     return a, b, c, d
 
 
-def _quat_to_euler(q, seq):
+def quat_to_euler(q, seq):
     """Euler angles (output order) of a scalar-last quaternion of any non-zero norm."""
     # The angles stacked on the last axis: XLA:CPU writes them in vectorised loops (a stack on
     # a leading axis gave one narrow loop here; after the Shepperd column, in matrix_to_euler,
@@ -316,7 +320,7 @@ def _matrix_to_euler_parts(R, seq):
     """quaternion_to_euler's extraction of the Shepperd column: the angles do not depend on the
     quaternion's norm or sign, so the column needs no normalisation (NaN for a non-rotation,
     through its diagonal). The rule below is JAX's derivative of this code (tested)."""
-    c, _ = _selected_column(R)
+    c, _ = selected_column(R)
     return _quat_to_euler_parts(tuple(c), seq)
 
 
@@ -326,7 +330,7 @@ def _matrix_to_euler_parts_jvp(seq, primals, tangents):
     # column is written once (the barrier): the rule's loops read it instead of each
     # extracting it again from R.
     (R,), (dR,) = primals, tangents
-    c, dc = _column_tangent(R, dR)
+    c, dc = column_tangent(R, dR)
     c = jax.lax.optimization_barrier(tuple(c))
     return jax.jvp(lambda c: _quat_to_euler_parts(c, seq), (c,), (tuple(dc),))
 
@@ -390,7 +394,7 @@ def euler_to_matrix(angles: ArrayLike, seq: str, degrees: bool = False) -> Array
         ```
     """
     a, dt = _prep_angles(angles, degrees)
-    return cast(_to_matrix(_euler_to_quat(a, seq)), dt)
+    return cast(quat_to_matrix(_euler_to_quat(a, seq)), dt)
 
 
 @public
@@ -448,7 +452,7 @@ def quaternion_to_euler(
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     parse_seq(seq)
-    ang = _quat_to_euler(to_scalar_last(q, scalar_first), seq)
+    ang = quat_to_euler(to_scalar_last(q, scalar_first), seq)
     if degrees:
         ang = jnp.rad2deg(ang)
     return cast(ang, dt)

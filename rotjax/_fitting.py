@@ -15,7 +15,7 @@ from jax import Array
 from jax.typing import ArrayLike
 
 from ._eigen import (
-    _UNROLL_MAX,
+    UNROLL_MAX,
     nearest_quaternion,
     nearest_rotation,
     pow2_factors,
@@ -38,8 +38,8 @@ from ._numerics import (
     to_scalar_last,
     vee,
 )
-from ._quaternion import _conjugate, _multiply, _normalize
-from ._rotvec import _quat_to_rotvec, _rotvec_to_quat
+from ._quaternion import quat_conjugate, quat_multiply, quat_normalize
+from ._rotvec import quat_to_rotvec, rotvec_to_quat
 
 ALIGN_METHODS = ("svd", "q-method")
 
@@ -74,7 +74,7 @@ def _sum_outer(x, y, fx, fy):
 
 
 def _unrolled(x, y):
-    return x.shape[-2] * max(x.shape[-1], y.shape[-1]) <= _UNROLL_MAX
+    return x.shape[-2] * max(x.shape[-1], y.shape[-1]) <= UNROLL_MAX
 
 
 def _broadcast_batch(x, y, fx, fy):
@@ -469,7 +469,7 @@ def quaternion_mean(
         raise ValueError(f"q: expected shape (..., N, 4), got {tuple(q.shape)}")
     if q.shape[-2] == 0:
         raise ValueError("q: the mean of an empty set (N = 0) is undefined")
-    q = _normalize(to_scalar_last(q, scalar_first))
+    q = quat_normalize(to_scalar_last(q, scalar_first))
     if weights is not None and (weights.ndim < 1 or weights.shape[-1] != q.shape[-2]):
         raise ValueError(f"weights: expected shape (..., {q.shape[-2]}), got {weights.shape}")
     qw = q if weights is None else q * pow2_scale(weights, (-1,))[..., None]
@@ -518,8 +518,8 @@ def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike, scalar_first: bool = False) 
     check_shape(p, (4,), "p")
     check_shape(q, (4,), "q")
     check_shape(t, (), "t")
-    p = _normalize(to_scalar_last(p, scalar_first))
+    p = quat_normalize(to_scalar_last(p, scalar_first))
     q = to_scalar_last(q, scalar_first)
-    rel = _quat_to_rotvec(_multiply(_conjugate(p), q))  # angle in [0, pi]: the shorter arc
-    out = _multiply(p, _rotvec_to_quat(like_rank(t[..., None], rel) * rel))
+    rel = quat_to_rotvec(quat_multiply(quat_conjugate(p), q))  # angle in [0, pi]: the shorter arc
+    out = quat_multiply(p, rotvec_to_quat(like_rank(t[..., None], rel) * rel))
     return cast(from_scalar_last(out, scalar_first), dt)

@@ -14,7 +14,7 @@ from jax.typing import ArrayLike
 
 from ._numerics import jit, matvec
 from ._quaternion import quaternion_conjugate, quaternion_multiply
-from ._rotation import Rotation, _concrete, _float
+from ._rotation import Rotation, float_array, host_value
 from ._rotvec import quaternion_to_rotvec, rotvec_to_quaternion
 from ._se3 import so3_right_jacobian, so3_right_jacobian_inverse
 
@@ -23,7 +23,7 @@ def _keyframe_times(times, rotations, dim_msg, order_msg):
     """Keyframe times as a 1-D array matching `rotations` (scipy's checks and messages)."""
     if rotations._stored.ndim > 2:
         raise ValueError("Rotations with more than 1 leading dimension are not supported.")
-    t = _float(times, rotations._stored.dtype)
+    t = float_array(times, rotations._stored.dtype)
     if t.ndim != 1:
         raise ValueError(dim_msg)
     if t.shape[0] != len(rotations):
@@ -31,7 +31,7 @@ def _keyframe_times(times, rotations, dim_msg, order_msg):
             "Expected number of rotations to be equal to number of timestamps given, got "
             f"{len(rotations)} rotations and {t.shape[0]} timestamps."
         )
-    host = _concrete(times)
+    host = host_value(times)
     if host is not None and np.any(np.diff(host) <= 0):
         raise ValueError(order_msg)
     return t
@@ -129,10 +129,10 @@ class Slerp:
             # [0.  0.5 1. ]
             ```
         """
-        t = _float(times, self.times.dtype)
+        t = float_array(times, self.times.dtype)
         if t.ndim > 1:
             raise ValueError("`times` must be at most 1-dimensional.")
-        host = _concrete(times)
+        host = host_value(times)
         # The range is checked on the host only where both the times and the keyframe times
         # are concrete (under jit, or with traced keyframes, out-of-range times give NaN).
         if host is not None and host.size and not isinstance(self.times, jax.core.Tracer):
@@ -303,7 +303,7 @@ class RotationSpline:
         """
         if order not in (0, 1, 2):
             raise ValueError("`order` must be 0, 1 or 2.")
-        t = _float(times, self.times.dtype)
+        t = float_array(times, self.times.dtype)
         if t.ndim > 1:
             raise ValueError("`times` must be at most 1-dimensional.")
         out = _spline_eval(self.times, self.rotations._quat, self._coeffs, t, order)

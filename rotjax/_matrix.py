@@ -65,7 +65,7 @@ def _homogeneous_k(R, split=False):
     return cols, diag, (h, y, s)
 
 
-def _selected_column(R):
+def selected_column(R):
     """:func:`rotjax._shepperd.select_column` of the prescaled, homogeneous ``K`` of ``R``."""
     cols, diag, _ = _homogeneous_k(R)
     return select_column(cols, diag)
@@ -80,12 +80,12 @@ def _hemisphere_scale(v, sq):
 
 
 def _shepperd(R):
-    """The quaternion of :func:`_shepperd_parts`, stacked."""
-    return stack(_shepperd_parts(tuple(entries(R))))
+    """The quaternion of :func:`shepperd_parts`, stacked."""
+    return stack(shepperd_parts(tuple(entries(R))))
 
 
 @jax.custom_jvp
-def _shepperd_parts(R):
+def shepperd_parts(R):
     """Shepperd extraction, scalar last, `w >= 0`: the selected column of `K` over its norm.
 
     Written for XLA:CPU: every step is a per-rotation scalar expression (no reduction over a
@@ -96,15 +96,15 @@ def _shepperd_parts(R):
     ``t^2``), and at a switch of the selected column it is the derivative of the branch taken.
     The rule below is that derivative, written on per-rotation scalars (tested equal to JAX's).
     """
-    c, sq = _selected_column(R)
+    c, sq = selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
     z = _hemisphere_scale(c, sq)
     return tuple(x * z for x in c)
 
 
-def _column_tangent(R, dR):
-    """The selected column ``c`` of the homogeneous ``K`` (as :func:`_selected_column`) and its
+def column_tangent(R, dR):
+    """The selected column ``c`` of the homogeneous ``K`` (as :func:`selected_column`) and its
     tangent ``dc``: JAX's derivative of that code, term by term. ``r = s R`` (``s`` a constant
     power of two), ``t = h rsqrt(h)`` with ``h = |r|^2 / 3``, so ``dt = tau dh``,
     ``tau = y (1 - h y^2 / 2)``, ``y = rsqrt(h)`` (rsqrt's rule); ``K`` is affine in ``R``
@@ -121,7 +121,7 @@ def _column_tangent(R, dR):
 
 def _shepperd_tangent(R, dR):
     # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc.
-    c, dc = _column_tangent(R, dR)
+    c, dc = column_tangent(R, dR)
     z = _hemisphere_scale(c, sum_squares(c))
     q = [x * z for x in c]
     u = [x * z for x in dc]
@@ -129,10 +129,10 @@ def _shepperd_tangent(R, dR):
     return tuple(u[a] - q[a] * qu for a in range(4))
 
 
-@_shepperd_parts.defjvp
+@shepperd_parts.defjvp
 def _shepperd_parts_jvp(primals, tangents):
     (R,), (dR,) = primals, tangents
-    return _shepperd_parts(R), _shepperd_tangent(R, dR)
+    return shepperd_parts(R), _shepperd_tangent(R, dR)
 
 
 def _k_times(cols, p):
@@ -156,7 +156,7 @@ def _markley(R):
     return stack([x * k for x in v])
 
 
-def _from_matrix(R, method: str):
+def quat_from_matrix(R, method: str):
     if method == "shepperd":
         return _shepperd(R)
     if method == "markley":
@@ -232,4 +232,4 @@ def matrix_to_quaternion(
     check_shape(R, (3, 3), "R")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    return cast(from_scalar_last(_from_matrix(R, method), scalar_first), dt)
+    return cast(from_scalar_last(quat_from_matrix(R, method), scalar_first), dt)

@@ -22,7 +22,7 @@ from ._numerics import (
     to_scalar_last,
     unstack,
 )
-from ._quaternion import _scaled_vector_part
+from ._quaternion import scaled_vector_part
 
 
 @public
@@ -54,7 +54,7 @@ def quaternion_to_mrp(q: ArrayLike, scalar_first: bool = False) -> Array:
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     # Any finite scale: |q|^2 stays in range; NaN for the zero quaternion or a non-finite one.
-    return cast(_scaled_vector_part(to_scalar_last(q, scalar_first), _mrp_scale, True), dt)
+    return cast(scaled_vector_part(to_scalar_last(q, scalar_first), _mrp_scale, True), dt)
 
 
 def _mrp_scale(n2, w):

@@ -378,7 +378,7 @@ def _broadcast_batches(arrays: dict) -> None:
             arrays[n] = x.reshape((1,) * (rank - len(s)) + x.shape)
 
 
-def _check_static(name: str, value):
+def check_static(name: str, value):
     """Validate one configuration argument's type (its value is checked by the function that
     reads it, which knows the valid choices) and return it in canonical form."""
     if name in ("degrees", "scalar_first", "extrinsic", "normalize"):
@@ -395,7 +395,7 @@ def _check_static(name: str, value):
     return value
 
 
-def _check_array(name: str, value) -> None:
+def check_array(name: str, value) -> None:
     """Reject complex input, whose imaginary part would otherwise be dropped silently."""
     if value is not None and jnp.iscomplexobj(value):
         raise TypeError(f"{name} must be real (float or integer), got complex {value.dtype}")
@@ -474,9 +474,9 @@ def public(fun=None, *, static=(), time_leading=()):
         bound = sig.bind(*args, **kwargs)
         for name, value in bound.arguments.items():
             if name in static:
-                bound.arguments[name] = _check_static(name, value)
+                bound.arguments[name] = check_static(name, value)
             else:
-                _check_array(name, value)
+                check_array(name, value)
         return bound
 
     arrays = [n for n in params if n not in static]

@@ -18,9 +18,9 @@ from ._numerics import (
     public,
     to_scalar_last,
 )
-from ._quaternion import _multiply, _normalize, _prescaled, _renormalize
-from ._rates import _check_frame, _quat_rate
-from ._rotvec import _rotvec_to_quat
+from ._quaternion import quat_multiply, quat_normalize, quat_prescaled, quat_renormalize
+from ._rates import check_frame, quat_rate
+from ._rotvec import rotvec_to_quat
 
 METHODS = ("exponential", "euler", "rk4")
 
@@ -32,7 +32,7 @@ def _propagation_args(q, omega, frame, method, methods, name):
     (q, w), out_dt = as_float(q, omega)
     check_shape(q, (4,), name)
     check_shape(w, (3,), "omega")
-    _check_frame(frame)
+    check_frame(frame)
     if method not in methods:
         raise ValueError(f"method must be one of {methods}, got {method!r}")
     return q, w, out_dt
@@ -99,23 +99,23 @@ def integrate_angular_velocity(
     """
     q, w, out_dt = _propagation_args(q, omega, frame, method, METHODS, "q")
     h = like_rank(jnp.asarray(dt).astype(q.dtype)[..., None], q)
-    q = _prescaled(to_scalar_last(q, scalar_first))  # q_next is then of order 1 too
+    q = quat_prescaled(to_scalar_last(q, scalar_first))  # q_next is then of order 1 too
     if method == "exponential":
-        dq = _rotvec_to_quat(w * h)
-        q_next = _multiply(q, dq) if frame == "body" else _multiply(dq, q)
+        dq = rotvec_to_quat(w * h)
+        q_next = quat_multiply(q, dq) if frame == "body" else quat_multiply(dq, q)
     elif method == "euler":
-        q_next = q + h * _quat_rate(q, w, frame)
+        q_next = q + h * quat_rate(q, w, frame)
     else:
 
         def f(x):
-            return _quat_rate(x, w, frame)
+            return quat_rate(x, w, frame)
 
         k1 = f(q)
         k2 = f(q + h / 2 * k1)
         k3 = f(q + h / 2 * k2)
         k4 = f(q + h * k3)
         q_next = q + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return from_scalar_last(_renormalize(q_next), scalar_first).astype(out_dt)
+    return from_scalar_last(quat_renormalize(q_next), scalar_first).astype(out_dt)
 
 
 # --- attitude from sampled angular velocity ----------------------------------------------------
@@ -230,19 +230,19 @@ def integrate_angular_velocity_samples(
     if w.ndim < 2:
         raise ValueError(f"omega: expected shape (T + 1, ..., 3), got {tuple(w.shape)}")
     h = jnp.asarray(dt).astype(q.dtype)
-    q = _normalize(to_scalar_last(q, scalar_first))
+    q = quat_normalize(to_scalar_last(q, scalar_first))
     batch = jnp.broadcast_shapes(q.shape[:-1], w.shape[1:-1], h.shape)
     q = jnp.broadcast_to(q, batch + (4,))
     w = jnp.broadcast_to(w, w.shape[:1] + batch + (3,))
     if w.shape[0] == 1:
         return from_scalar_last(q[None], scalar_first).astype(out_dt)
     h = jnp.broadcast_to(h, batch)[None, ..., None]
-    dq = _rotvec_to_quat(_step_rotvecs(w, h, frame, method))  # (T, ..., 4)
+    dq = rotvec_to_quat(_step_rotvecs(w, h, frame, method))  # (T, ..., 4)
     if frame == "body":  # q_k = q0 dq_0 ... dq_{k-1}
-        prods = jax.lax.associative_scan(_multiply, dq, axis=0)
-        qs = _multiply(q[None], prods)
+        prods = jax.lax.associative_scan(quat_multiply, dq, axis=0)
+        qs = quat_multiply(q[None], prods)
     else:  # q_k = dq_{k-1} ... dq_0 q0
-        prods = jax.lax.associative_scan(lambda x, y: _multiply(y, x), dq, axis=0)
-        qs = _multiply(prods, q[None])
-    out = jnp.concatenate([q[None], _renormalize(qs)], axis=0)
+        prods = jax.lax.associative_scan(lambda x, y: quat_multiply(y, x), dq, axis=0)
+        qs = quat_multiply(prods, q[None])
+    out = jnp.concatenate([q[None], quat_renormalize(qs)], axis=0)
     return from_scalar_last(out, scalar_first).astype(out_dt)

@@ -2,7 +2,7 @@
 
 Internally every quaternion is scalar last, `(x, y, z, w)`; `scalar_first=True` reorders at the
 boundary. Functions that interpret a quaternion as a rotation normalise it, at any finite non-zero
-scale (an exact power-of-two prescaling, `_prescaled`); the algebraic functions (product,
+scale (an exact power-of-two prescaling, `quat_prescaled`); the algebraic functions (product,
 conjugate) do not, because kinematics needs them on non-unit quaternions.
 """
 
@@ -63,28 +63,28 @@ def _prescale(parts):
     return [x * s for x in parts], s
 
 
-def _prescaled(q):
+def quat_prescaled(q):
     """:func:`_prescaled_parts` stacked: ``q`` scaled, NaN where it is not a rotation. A
     function of the rotation gives the same result for ``q`` and for this."""
     return stack(_prescaled_parts(q)[0])
 
 
-def _scaled_vector_part(q, scale, with_w):
+def scaled_vector_part(q, scale, with_w):
     """``k q_v`` with ``k = scale(n2, w)`` a per-rotation function of the prescaled quaternion
     (see :func:`_prescaled_parts`), ``n2 = |q_v|^2`` (``|q|^2`` with ``with_w``): the
     logarithm map and the MRP."""
-    return stack(_scaled_vector_parts(tuple(unstack(q)), scale, with_w))
+    return stack(scaled_vector_parts(tuple(unstack(q)), scale, with_w))
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
-def _scaled_vector_parts(q, scale, with_w):
+def scaled_vector_parts(q, scale, with_w):
     (x, y, z, w), _ = _prescale(q)  # NaN for the zero quaternion or a non-finite one
     n2 = x * x + y * y + z * z + (w * w if with_w else 0)
     k = scale(n2, w)
     return k * x, k * y, k * z
 
 
-@_scaled_vector_parts.defjvp
+@scaled_vector_parts.defjvp
 def _scaled_vector_parts_jvp(scale, with_w, primals, tangents):
     # JAX's derivative of the code above, grouped: with the prescaled components (s a constant
     # power of two), d(k v) = k dv + v dk, dk = 2 k_n2 (u . du) + k_w dw (u = v, or q with
@@ -102,7 +102,7 @@ def _scaled_vector_parts_jvp(scale, with_w, primals, tangents):
     return (k * x, k * y, k * z), out
 
 
-def _multiply(p, q):
+def quat_multiply(p, q):
     """Hamilton product of scalar-last quaternions (no normalisation)."""
     px, py, pz, pw = unstack(p)
     qx, qy, qz, qw = unstack(q)
@@ -116,20 +116,20 @@ def _multiply(p, q):
     )
 
 
-def _conjugate(q):
+def quat_conjugate(q):
     x, y, z, w = unstack(q)
     return stack([-x, -y, -z, w])
 
 
-def _normalize(q):
-    """`q / |q|` for `q` at any finite scale (`_prescaled` first); NaN for the zero
+def quat_normalize(q):
+    """`q / |q|` for `q` at any finite scale (`quat_prescaled` first); NaN for the zero
     quaternion (0/0, on purpose: it is not a rotation) and for a non-finite component."""
     p, _ = _prescaled_parts(q)
     r = rsqrt(sum_squares(p))
     return stack([x * r for x in p])
 
 
-def _renormalize(q):
+def quat_renormalize(q):
     """`q / |q|` for `q` of order 1, computed from unit or prescaled quaternions (a step of
     an integrator, a product): no scaling, whose cost would be that of the step. The squared
     norm is a sum of four squares: XLA:CPU runs a reduction over the last axis as a loop of its
@@ -139,12 +139,12 @@ def _renormalize(q):
     return stack([x * r for x in p])
 
 
-def _to_matrix(q):
+def quat_to_matrix(q):
     """Rotation matrix of a scalar-last quaternion of any non-zero norm."""
-    return _to_matrix_parts(*unstack(q))
+    return quat_to_matrix_parts(*unstack(q))
 
 
-def _to_matrix_parts(x, y, z, w):
+def quat_to_matrix_parts(x, y, z, w):
     """Rotation matrix of a quaternion given by its components (per-rotation arrays): the
     entries of :func:`_matrix_entries`, stacked."""
     e = _matrix_entries(x, y, z, w)
@@ -187,7 +187,7 @@ def _homogeneous_matrix(x, y, z, w, reciprocal):
     return tuple(e for row in rows for e in row)
 
 
-def _angle(q):
+def quat_angle(q):
     """Rotation angle in [0, pi] of a scalar-last quaternion of any finite norm (NaN for zero
     or a non-finite component)."""
     (x, y, z, w), _ = _prescaled_parts(q)  # |w|, n of order 1: atan2's derivative is finite
@@ -231,7 +231,7 @@ def quaternion_to_matrix(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return cast(_to_matrix_parts(*_prescaled_parts(q)[0]), dt)
+    return cast(quat_to_matrix_parts(*_prescaled_parts(q)[0]), dt)
 
 
 @public
@@ -258,7 +258,7 @@ def quaternion_multiply(p: ArrayLike, q: ArrayLike, scalar_first: bool = False) 
         ```
     """
     p, q, dt = _prep2(p, q, scalar_first)
-    return cast(from_scalar_last(_multiply(p, q), scalar_first), dt)
+    return cast(from_scalar_last(quat_multiply(p, q), scalar_first), dt)
 
 
 @public
@@ -281,7 +281,7 @@ def quaternion_conjugate(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return cast(from_scalar_last(_conjugate(q), scalar_first), dt)
+    return cast(from_scalar_last(quat_conjugate(q), scalar_first), dt)
 
 
 @public
@@ -333,7 +333,7 @@ def quaternion_normalize(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return cast(from_scalar_last(_normalize(q), scalar_first), dt)
+    return cast(from_scalar_last(quat_normalize(q), scalar_first), dt)
 
 
 @public
@@ -363,7 +363,7 @@ def quaternion_apply(q: ArrayLike, v: ArrayLike, scalar_first: bool = False) -> 
     return cast(_apply(to_scalar_last(q, scalar_first), v), dt)
 
 
-def _turn(p, v):
+def quat_turn(p, v):
     """``R(p) v - v`` for a unit quaternion ``p`` (four per-rotation arrays, scalar last) and
     ``v`` (three): ``w t + p_v x t`` with ``t = 2 p_v x v``. A polynomial, quadratic in ``p``
     and linear in ``v``, for any ``p``."""
@@ -382,14 +382,14 @@ def _apply(q, v):
 def _apply_parts(q, v):
     p, _ = _prescale(q)
     r = rsqrt(sum_squares(p))  # the unit quaternion, on per-rotation scalars
-    d = _turn([x * r for x in p], v)
+    d = quat_turn([x * r for x in p], v)
     return tuple(a + b for a, b in zip(v, d, strict=True))
 
 
 @_apply_parts.defjvp
 def _apply_parts_jvp(primals, tangents):
     # JAX's derivative of the code above, grouped. With p the prescaled quaternion (s a
-    # constant power of two), r = 1 / |p| and T = _turn (T(u, v) = r^2 T(p, v) for u = r p):
+    # constant power of two), r = 1 / |p| and T = quat_turn (T(u, v) = r^2 T(p, v) for u = r p):
     # d out = dv + r^2 T(p, dv) + r^2 s T'(p, v)[dq] - 2 r^4 s (p . dq) T(p, v),
     # T' the derivative in p (linear in both), T'(p, v)[p] = 2 T(p, v), and
     # du = r s (dq - r^2 p (p . dq)): every component a per-rotation expression, r computed
@@ -398,10 +398,10 @@ def _apply_parts_jvp(primals, tangents):
     (q, v), (d, e) = primals, tangents
     p, s = _prescale(q)
     r2 = rsqrt(sum_squares(p)) ** 2
-    by_v = _turn(p, e)  # T(p, dv): linear in dv
-    by_q = jax.jvp(lambda u: _turn(u, v), (p,), (list(d),))[1]  # T'(p, v)[dq]
+    by_v = quat_turn(p, e)  # T(p, dv): linear in dv
+    by_q = jax.jvp(lambda u: quat_turn(u, v), (p,), (list(d),))[1]  # T'(p, v)[dq]
     m = (2 * s) * (r2 * r2) * sum(x * dx for x, dx in zip(p, d, strict=True))
-    turn = _turn(p, v)
+    turn = quat_turn(p, v)
     out = tuple(e[a] + r2 * by_v[a] + (r2 * s) * by_q[a] - m * turn[a] for a in range(3))
     return _apply_parts(q, v), out
 
@@ -435,7 +435,7 @@ def relative_rotation(q_a: ArrayLike, q_b: ArrayLike, scalar_first: bool = False
         ```
     """
     qa, qb, dt = _prep2(q_a, q_b, scalar_first, ("q_a", "q_b"))
-    rel = _renormalize(_multiply(_conjugate(_prescaled(qa)), _prescaled(qb)))
+    rel = quat_renormalize(quat_multiply(quat_conjugate(quat_prescaled(qa)), quat_prescaled(qb)))
     return cast(from_scalar_last(rel, scalar_first), dt)
 
 
@@ -467,7 +467,7 @@ def rotation_angle(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return cast(_angle(q), dt)
+    return cast(quat_angle(q), dt)
 
 
 @public
@@ -497,4 +497,4 @@ def angle_between(p: ArrayLike, q: ArrayLike, scalar_first: bool = False) -> Arr
         ```
     """
     p, q, dt = _prep2(p, q, scalar_first)
-    return cast(_angle(_multiply(_conjugate(_prescaled(p)), _prescaled(q))), dt)
+    return cast(quat_angle(quat_multiply(quat_conjugate(quat_prescaled(p)), quat_prescaled(q))), dt)

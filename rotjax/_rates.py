@@ -45,12 +45,12 @@ from ._numerics import (
     unit_scale,
     vee,
 )
-from ._quaternion import _conjugate, _multiply
+from ._quaternion import quat_conjugate, quat_multiply
 
 FRAMES = ("body", "world")
 
 
-def _check_frame(frame) -> None:
+def check_frame(frame) -> None:
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
 
@@ -72,7 +72,7 @@ def _reduce(seq: str, frame: str):
             the rows of `E^-1` on output).
     """
     axes, intrinsic = parse_seq(seq)
-    _check_frame(frame)
+    check_frame(frame)
     world = frame == "world"
     reverse = intrinsic == world  # intrinsic/world and extrinsic/body reverse the order
     return (axes[::-1] if reverse else axes), world, reverse
@@ -328,11 +328,11 @@ def _pure(omega):
     return jnp.concatenate([omega, jnp.zeros_like(omega[..., :1])], axis=-1)
 
 
-def _quat_rate(q, omega, frame):
+def quat_rate(q, omega, frame):
     # body: q' = q * (omega_b, 0) / 2;  world: q' = (omega_w, 0) * q / 2  (R(p q) = R(p) R(q)).
     # "q_v' = (q_s w - q_v x w) / 2" (Markley & Crassidis 2014) is the world-frame form.
     w = _pure(omega)
-    return 0.5 * (_multiply(q, w) if frame == "body" else _multiply(w, q))
+    return 0.5 * (quat_multiply(q, w) if frame == "body" else quat_multiply(w, q))
 
 
 @public
@@ -365,8 +365,8 @@ def quaternion_derivative(
     (q, w), dt = as_float(q, omega)
     check_shape(q, (4,), "q")
     check_shape(w, (3,), "omega")
-    _check_frame(frame)
-    qd = _quat_rate(to_scalar_last(q, scalar_first), w, frame)
+    check_frame(frame)
+    qd = quat_rate(to_scalar_last(q, scalar_first), w, frame)
     return cast(from_scalar_last(qd, scalar_first), dt)
 
 
@@ -401,7 +401,7 @@ def quaternion_derivative_to_angular_velocity(
     (q, qd), dt = as_float(q, q_dot)
     check_shape(q, (4,), "q")
     check_shape(qd, (4,), "q_dot")
-    _check_frame(frame)
+    check_frame(frame)
     q = to_scalar_last(q, scalar_first)
     qd = to_scalar_last(qd, scalar_first)
     # omega is homogeneous of degree 0 in (q, q_dot): both scaled by the power of two that
@@ -409,8 +409,8 @@ def quaternion_derivative_to_angular_velocity(
     # neither underflow nor overflow.
     s = unit_scale(max_abs(*(q[..., i] for i in range(4))))[..., None]
     q, qd = q * s, qd * s
-    qc = _conjugate(q)
-    prod = _multiply(qc, qd) if frame == "body" else _multiply(qd, qc)
+    qc = quat_conjugate(q)
+    prod = quat_multiply(qc, qd) if frame == "body" else quat_multiply(qd, qc)
     x, y, z, w = (q[..., i : i + 1] for i in range(4))
     return cast((2 * prod[..., :3] / (x * x + y * y + z * z + w * w)), dt)
 
@@ -444,7 +444,7 @@ def matrix_derivative_to_angular_velocity(
     (R, Rd), dt = as_float(R, R_dot)
     check_shape(R, (3, 3), "R")
     check_shape(Rd, (3, 3), "R_dot")
-    _check_frame(frame)
+    check_frame(frame)
     Rt = jnp.swapaxes(R, -1, -2)
     return cast(vee(matmul(Rt, Rd) if frame == "body" else matmul(Rd, Rt)), dt)
 
@@ -478,7 +478,7 @@ def angular_velocity_to_matrix_derivative(
     (R, w), dt = as_float(R, omega)
     check_shape(R, (3, 3), "R")
     check_shape(w, (3,), "omega")
-    _check_frame(frame)
+    check_frame(frame)
     W = hat(w)
     return cast((matmul(R, W) if frame == "body" else matmul(W, R)), dt)
 

@@ -30,8 +30,15 @@ from ._numerics import (
     unit_scale,
     unstack,
 )
-from ._quaternion import _conjugate, _multiply, _renormalize, _to_matrix, _turn
-from ._rotation import Rotation, _Batch, _concrete, _float, _identity_quat, _input
+from ._quaternion import quat_conjugate, quat_multiply, quat_renormalize, quat_to_matrix, quat_turn
+from ._rotation import (
+    BatchedPytree,
+    Rotation,
+    constructor_input,
+    float_array,
+    host_value,
+    identity_quat,
+)
 from ._se3 import exp_parts, homogeneous, log_parts
 
 # --- SE(3) exponential coordinates ------------------------------------------------------
@@ -43,7 +50,7 @@ from ._se3 import exp_parts, homogeneous, log_parts
 def _rotate(q, v):
     """``R(q) v`` for a unit scalar-last ``q``, both of one batch shape."""
     v = unstack(v)
-    return stack([a + d for a, d in zip(v, _turn(unstack(q), v), strict=True)])
+    return stack([a + d for a, d in zip(v, quat_turn(unstack(q), v), strict=True)])
 
 
 def _pose_exp(xi):
@@ -88,12 +95,12 @@ def _as_matrix(q, t):
 @jit
 def _pose_compose(q1, t1, q2, t2):
     q1, t1, q2, t2 = broadcast_batch(q1, t1, q2, t2)
-    return _renormalize(_multiply(q1, q2)), t1 + _rotate(q1, t2)
+    return quat_renormalize(quat_multiply(q1, q2)), t1 + _rotate(q1, t2)
 
 
 @jit
 def _pose_inv(q, t):
-    qc = _conjugate(q)
+    qc = quat_conjugate(q)
     return qc, -_rotate(qc, t)
 
 
@@ -104,7 +111,7 @@ def _pose_apply(q, t, v, inverse):
         q, t = _pose_inv(q, t)
     if np.prod(q.shape[:-1]) < np.prod(v.shape[:-1]):
         # Fewer transforms than vectors: each matrix once, then 9 multiply-adds a vector.
-        r = _to_matrix(q)
+        r = quat_to_matrix(q)
         r, t, v = jnp.broadcast_to(r, batch + (3, 3)), *broadcast_batch(t, v)
         return matvec(r, v) + t
     q, t, v = broadcast_batch(q, t, v)
@@ -149,13 +156,13 @@ def _from_dual_quat(dq, scalar_first):
     real = to_scalar_last(dq[..., :4], scalar_first)
     dual = to_scalar_last(dq[..., 4:], scalar_first)
     real, dual = _normalize_dq(real, dual)
-    return real, 2 * _multiply(dual, _conjugate(real))[..., :3]
+    return real, 2 * quat_multiply(dual, quat_conjugate(real))[..., :3]
 
 
 @jit(static_argnames="scalar_first")
 def _as_dual_quat(q, t, scalar_first):
     tq = jnp.concatenate([t, jnp.zeros_like(t[..., :1])], axis=-1)
-    dual = 0.5 * _multiply(tq, q)
+    dual = 0.5 * quat_multiply(tq, q)
     if scalar_first:
         q, dual = jnp.roll(q, 1, axis=-1), jnp.roll(dual, 1, axis=-1)
     return jnp.concatenate([q, dual], axis=-1)
@@ -225,7 +232,7 @@ def _common(*arrays):
 
 
 @jax.tree_util.register_pytree_node_class
-class RigidTransform(_Batch):
+class RigidTransform(BatchedPytree):
     """Rigid transforms (rotation and translation) in 3 dimensions, scipy's API on JAX arrays.
 
     `T v = R v + t`: a rotation `R` followed by a translation `t`; as a matrix
@@ -275,7 +282,7 @@ class RigidTransform(_Batch):
 
     def __init__(self, matrix: ArrayLike, normalize: bool = True, copy: bool = True):
         del copy  # JAX arrays are immutable: there is nothing to copy
-        m = _input(matrix)
+        m = constructor_input(matrix)
         if m.ndim < 2 or m.shape[-2:] != (4, 4):
             raise ValueError(f"Expected `matrix` to have shape (..., 4, 4), got {m.shape}.")
         if normalize and isinstance(m, np.ndarray):
@@ -388,9 +395,9 @@ class RigidTransform(_Batch):
             #  [1. 3. 1.]]
             ```
         """
-        t = _float(translation)
+        t = float_array(translation)
         _check_last(t, 3, "translation")
-        return RigidTransform._raw(_identity_quat(t.shape[:-1], t.dtype), t)
+        return RigidTransform._raw(identity_quat(t.shape[:-1], t.dtype), t)
 
     @staticmethod
     def from_components(translation: ArrayLike, rotation: Rotation) -> RigidTransform:
@@ -419,7 +426,7 @@ class RigidTransform(_Batch):
             raise TypeError(
                 f"Expected `rotation` to be a `Rotation` instance, got {type(rotation)}."
             )
-        t = _float(translation)
+        t = float_array(translation)
         _check_last(t, 3, "translation")
         q, t = _common(rotation.as_quat(), t)
         try:
@@ -455,7 +462,7 @@ class RigidTransform(_Batch):
             # [0.637 0.637 0.   ]
             ```
         """
-        xi = _input(exp_coords)
+        xi = constructor_input(exp_coords)
         _check_last(xi, 6, "exp_coords")
         return RigidTransform._raw(*_from_exp_coords(xi))
 
@@ -485,7 +492,7 @@ class RigidTransform(_Batch):
             # [2. 0. 0.]
             ```
         """
-        dq = _input(dual_quat)
+        dq = constructor_input(dual_quat)
         _check_last(dq, 8, "dual_quat")
         return RigidTransform._raw(*_from_dual_quat(dq, scalar_first=bool(scalar_first)))
 
@@ -527,7 +534,7 @@ class RigidTransform(_Batch):
         elif not isinstance(shape, tuple):
             raise ValueError("`shape` must be an int or a tuple of ints or None.")
         dt = float if dtype is None else dtype
-        return RigidTransform._raw(_identity_quat(shape, dt), jnp.zeros((*shape, 3), dt))
+        return RigidTransform._raw(identity_quat(shape, dt), jnp.zeros((*shape, 3), dt))
 
     @staticmethod
     def concatenate(transforms: RigidTransform | Sequence[RigidTransform]) -> RigidTransform:
@@ -765,8 +772,8 @@ class RigidTransform(_Batch):
             ```
         """
         dtype = self._quat.dtype
-        host = _concrete(vector)
-        v = host.astype(dtype) if host is not None else _float(vector, dtype)
+        host = host_value(vector)
+        v = host.astype(dtype) if host is not None else float_array(vector, dtype)
         if v.ndim < 1 or v.shape[-1] != 3:
             raise ValueError(f"Expected vector to have shape (..., 3), got {v.shape}.")
         try:
@@ -821,10 +828,10 @@ class RigidTransform(_Batch):
         out = [q.shape[i] for i in keep]
         w = None
         if weights is not None:
-            host = _concrete(weights)
+            host = host_value(weights)
             if host is not None and np.any(host < 0):
                 raise ValueError("`weights` must be non-negative.")
-            w = _float(weights, q.dtype)
+            w = float_array(weights, q.dtype)
             if w.shape != self.shape:
                 raise ValueError(
                     f"Expected `weights` to match transform shape, got shape {w.shape} for "

@@ -29,11 +29,11 @@ from ._fitting import align_vectors as _align_vectors
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
-from ._numerics import _check_array, _check_static, broadcast_batch, cross, jit, to_scalar_last
+from ._numerics import broadcast_batch, check_array, check_static, cross, jit, to_scalar_last
 from ._quaternion import (
-    _multiply,
-    _prescaled,
     angle_between,
+    quat_multiply,
+    quat_prescaled,
     quaternion_apply,
     quaternion_conjugate,
     quaternion_multiply,
@@ -44,16 +44,16 @@ from ._quaternion import (
 from ._rotvec import quaternion_to_rotvec, rotvec_to_quaternion
 
 
-def _float(x, dtype=None):
+def float_array(x, dtype=None):
     """`x` as a JAX float array (integers to the default float; float32/64 kept)."""
-    _check_array("input", x)
+    check_array("input", x)
     x = jnp.asarray(x, dtype=dtype)
     if not jnp.issubdtype(x.dtype, jnp.floating):
         x = x.astype(float)
     return x
 
 
-def _concrete(x) -> np.ndarray | None:
+def host_value(x) -> np.ndarray | None:
     """`x` as NumPy if it is a host value (NumPy array, Python number or list), else `None`.
 
     Value checks that scipy makes (negative weights, zero norms) are made only on such inputs:
@@ -67,17 +67,17 @@ def _concrete(x) -> np.ndarray | None:
         return None
     kind = a.dtype.kind  # dtype kinds, not issubdtype: this runs on every eager call
     if kind == "c":
-        _check_array("input", a)  # raises the TypeError for complex input
+        check_array("input", a)  # raises the TypeError for complex input
     return a if kind == "f" else a.astype(float) if kind in "biu" else None
 
 
-def _input(x):
+def constructor_input(x):
     """A constructor's input: a host value stays in NumPy (in JAX's dtype for it) and goes to
     the device with the one jitted call that reads it, which costs less than a transfer of
     its own; anything else as a JAX float array."""
-    host = _concrete(x)
+    host = host_value(x)
     if host is None:
-        return _float(x)
+        return float_array(x)
     return host.astype(jax.dtypes.canonicalize_dtype(host.dtype), copy=False)
 
 
@@ -91,7 +91,7 @@ def _from_matrix_checked(matrix):
 
 @jit(static_argnames="scalar_first")
 def _scalar_last(q, scalar_first):
-    return to_scalar_last(_float(q), scalar_first)
+    return to_scalar_last(float_array(q), scalar_first)
 
 
 @jit
@@ -100,7 +100,7 @@ def _rotation_compose(p, q):
     # prescaled ones (exact powers of two) has a norm of order 1, which no reader depends on
     # (each normalises, or is homogeneous), so it is stored as it is.
     p, q = broadcast_batch(p, q, trailing=(1, 1))
-    return _multiply(_prescaled(p), _prescaled(q))
+    return quat_multiply(quat_prescaled(p), quat_prescaled(q))
 
 
 @jit(static_argnames="inverse")
@@ -110,7 +110,7 @@ def _rotation_apply(q, v, inverse):
     return quaternion_apply(*broadcast_batch(q, v, trailing=(1, 1)))
 
 
-def _identity_quat(shape, dtype):
+def identity_quat(shape, dtype):
     return jnp.zeros((*shape, 4), dtype).at[..., 3].set(1)
 
 
@@ -159,7 +159,7 @@ def _check_index(indexer, n: int):
     return indexer
 
 
-class _Batch:
+class BatchedPytree:
     """The batch bookkeeping shared by `Rotation` and `RigidTransform`: the object is its
     leaves (`_LEAVES`, arrays with the batch axes first and one trailing axis each), the first
     batch axis is scipy's sequence, and a single element (no batch axes) has no length, is not
@@ -251,7 +251,7 @@ class _Batch:
 
 
 @jax.tree_util.register_pytree_node_class
-class Rotation(_Batch):
+class Rotation(BatchedPytree):
     """Rotations in 3 dimensions, scipy's `Rotation` API on one JAX array.
 
     A `Rotation` holds a `(..., 4)` quaternion `[x, y, z, w]` (scalar last), the only
@@ -316,9 +316,9 @@ class Rotation(_Batch):
         self, quat: ArrayLike, normalize: bool = True, copy: bool = True, scalar_first: bool = False
     ):
         del copy  # JAX arrays are immutable: there is nothing to copy
-        normalize = _check_static("normalize", normalize)
-        scalar_first = _check_static("scalar_first", scalar_first)
-        q = _input(quat)
+        normalize = check_static("normalize", normalize)
+        scalar_first = check_static("scalar_first", scalar_first)
+        q = constructor_input(quat)
         if q.ndim < 1 or q.shape[-1] != 4:
             raise ValueError(f"Expected `quat` to have shape (..., 4), got {q.shape}.")
         host = isinstance(q, np.ndarray)
@@ -400,7 +400,7 @@ class Rotation(_Batch):
             # [ 0.  0. 90.]
             ```
         """
-        m = _input(matrix)
+        m = constructor_input(matrix)
         if m.ndim < 2 or m.shape[-2:] != (3, 3):
             raise ValueError(f"Expected `matrix` to have shape (..., 3, 3), got {m.shape}")
         if m.size == 0:  # an empty batch (the nearest-rotation solver needs an element)
@@ -431,7 +431,7 @@ class Rotation(_Batch):
             # (2,) [1.570796 3.141592]
             ```
         """
-        v = _input(rotvec)
+        v = constructor_input(rotvec)
         if v.ndim < 1 or v.shape[-1] != 3:
             raise ValueError(f"Expected `rot_vec` to have shape (..., 3), got {v.shape}")
         return Rotation._raw(rotvec_to_quaternion(v, degrees=degrees))
@@ -457,7 +457,7 @@ class Rotation(_Batch):
             #  [ 0.  0.  1.]]
             ```
         """
-        p = _input(mrp)
+        p = constructor_input(mrp)
         if p.ndim < 1 or p.shape[-1] != 3:
             raise ValueError(f"Expected `mrp` to have shape (..., 3), got {p.shape}")
         return Rotation._raw(mrp_to_quaternion(p))
@@ -491,7 +491,7 @@ class Rotation(_Batch):
                 "Expected axis specification to be a non-empty string of up to 3 "
                 f"characters, got {seq!r}"
             )
-        a = _input(angles)
+        a = constructor_input(angles)
         if a.ndim == 0:
             a = a[None]
         k = len(seq)
@@ -545,20 +545,20 @@ class Rotation(_Batch):
             ```
         """
         extrinsic = parse_order(order)
-        ax = _float(axes)
+        ax = float_array(axes)
         if ax.shape[-1] != 3:
             raise ValueError("Axes must be vectors of length 3.")
         if ax.ndim == 1:
             ax = ax[None]
         if not 1 <= ax.shape[-2] <= 3:
             raise ValueError(f"Expected up to 3 axes, got {ax.shape[-2]}")
-        host = _concrete(axes)
+        host = host_value(axes)
         if host is not None:
             h = np.atleast_2d(host)
             h = h / np.linalg.norm(h, axis=-1, keepdims=True)
             if np.any(np.abs(np.sum(h[..., :-1, :] * h[..., 1:, :], axis=-1)) > 1e-7):
                 raise ValueError("Consecutive axes must be orthogonal.")
-        a = _float(angles, ax.dtype)
+        a = float_array(angles, ax.dtype)
         if a.ndim == 0:
             a = a[None]
         if a.shape[-1] != ax.shape[-2]:
@@ -609,7 +609,7 @@ class Rotation(_Batch):
         if num is not None:
             shape = (num,)
         shape = _batch_shape(shape)
-        return Rotation._raw(_identity_quat(shape, dtype if dtype is not None else float))
+        return Rotation._raw(identity_quat(shape, dtype if dtype is not None else float))
 
     @staticmethod
     def random(
@@ -760,7 +760,7 @@ class Rotation(_Batch):
             # [30.  0.  0.] 0.0
             ```
         """
-        a_in, b_in = _float(a), _float(b)
+        a_in, b_in = float_array(a), float_array(b)
         dt = jnp.result_type(a_in.dtype, b_in.dtype)
         a2, b2 = jnp.atleast_2d(a_in.astype(dt)), jnp.atleast_2d(b_in.astype(dt))
         for x, x0, name in ((a2, a_in, "a"), (b2, b_in, "b")):
@@ -782,7 +782,7 @@ class Rotation(_Batch):
         if weights is None:
             w = jnp.ones(n, dt)
         else:
-            w = _float(weights, dt)
+            w = float_array(weights, dt)
             if w.ndim != 1:
                 raise ValueError(f"Expected `weights` to be 1 dimensional, got shape {w.shape}.")
             if n > 1 and w.shape[0] != n:
@@ -790,7 +790,7 @@ class Rotation(_Batch):
                     "Expected `weights` to have number of values equal to number of input "
                     f"vectors, got {w.shape[0]} values and {n} vectors."
                 )
-            host = _concrete(weights)
+            host = host_value(weights)
             if host is not None:
                 if np.any(host < 0):
                     raise ValueError("`weights` may not contain negative values")
@@ -807,12 +807,12 @@ class Rotation(_Batch):
             )
         # The primary pair (one pair, or the one with an infinite weight) is aligned exactly:
         # a zero vector there is an error, as in scipy, on host input (NaN for JAX arrays).
-        host_w = None if weights is None else _concrete(weights)
+        host_w = None if weights is None else host_value(weights)
         primary = 0 if n == 1 else None
         if host_w is not None and n > 1 and np.sum(np.isinf(host_w)) == 1:
             primary = int(np.argmax(np.isinf(host_w)))
         for x in (a, b) if primary is not None else ():
-            host = _concrete(x)
+            host = host_value(x)
             if host is not None and not np.any(np.atleast_2d(host)[primary]):
                 raise ValueError("Cannot align zero length primary vectors")
         q, rssd = _align_primary(a2, b2, w)
@@ -960,7 +960,7 @@ class Rotation(_Batch):
         """
         del suppress_warnings
         extrinsic = parse_order(order)
-        ax = _float(axes, self._stored.dtype)
+        ax = float_array(axes, self._stored.dtype)
         if ax.ndim < 2 or ax.shape[-2] != 3:
             raise ValueError(f"Expected 3 axes, got {ax.shape}.")
         if ax.shape[-1] != 3:
@@ -972,7 +972,7 @@ class Rotation(_Batch):
                 f"Expected `axes` to match number of rotations, got {ax.shape} axes and "
                 f"{self._stored.shape} rotations."
             ) from None
-        host = _concrete(axes)
+        host = host_value(axes)
         if host is not None:
             h = host / np.linalg.norm(host, axis=-1, keepdims=True)
             if np.any(np.abs(np.sum(h[..., :-1, :] * h[..., 1:, :], axis=-1)) > 1e-7):
@@ -1082,9 +1082,9 @@ class Rotation(_Batch):
             # [-0.  1.  0.] [-0. -1.  0.]
             ```
         """
-        host = _concrete(vectors)
+        host = host_value(vectors)
         dtype = self._stored.dtype
-        v = host.astype(dtype) if host is not None else _float(vectors, dtype)
+        v = host.astype(dtype) if host is not None else float_array(vectors, dtype)
         if v.ndim < 1 or v.shape[-1] != 3:
             raise ValueError(f"Expected input of shape (..., 3), got {v.shape}.")
         try:
@@ -1191,10 +1191,10 @@ class Rotation(_Batch):
         if weights is None:
             w = None
         else:
-            host = _concrete(weights)
+            host = host_value(weights)
             if host is not None and np.any(host < 0):
                 raise ValueError("`weights` must be non-negative.")
-            w = _float(weights, q.dtype)
+            w = float_array(weights, q.dtype)
             try:
                 w = jnp.broadcast_to(w, q.shape[:-1])
             except ValueError:

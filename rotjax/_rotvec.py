@@ -9,7 +9,7 @@ from jax import Array
 from jax.typing import ArrayLike
 
 from ._elementary import atan_ratio, rsqrt, sin_cos
-from ._matrix import _from_matrix
+from ._matrix import quat_from_matrix
 from ._numerics import (
     as_float,
     cast,
@@ -27,7 +27,7 @@ from ._numerics import (
     to_scalar_last,
     unstack,
 )
-from ._quaternion import _angle, _prescaled, _scaled_vector_part
+from ._quaternion import quat_angle, quat_prescaled, scaled_vector_part
 
 
 def _small(x2):
@@ -35,7 +35,7 @@ def _small(x2):
     return x2 < eps(x2.dtype) ** 0.5
 
 
-def _exp_coeffs(theta2):
+def exp_coeffs(theta2):
     """`sin(t/2)/t` and `cos(t/2)` for `t = sqrt(theta2)`, smooth at 0 (double where).
 
     Multiplications, additions and selects only (`rsqrt`, `sin_cos`), so that a conversion
@@ -51,35 +51,35 @@ def _exp_coeffs(theta2):
     return k, c
 
 
-def _rotvec_to_quat(v):
-    """`(k v, c)` with `k, c = _exp_coeffs(|v|^2)`: the exponential map, scalar last."""
+def rotvec_to_quat(v):
+    """`(k v, c)` with `k, c = exp_coeffs(|v|^2)`: the exponential map, scalar last."""
     return stack(_rotvec_to_quat_parts(tuple(unstack(v))))
 
 
 @jax.custom_jvp
 def _rotvec_to_quat_parts(v):
     x, y, z = v
-    k, c = _exp_coeffs(x * x + y * y + z * z)
+    k, c = exp_coeffs(x * x + y * y + z * z)
     return k * x, k * y, k * z, c
 
 
 @_rotvec_to_quat_parts.defjvp
 def _rotvec_to_quat_parts_jvp(primals, tangents):
     # JAX's derivative of the code above, grouped: d(k v) = k dv + v dk and dc, with
-    # dk = 2 k' (v . dv), dc = 2 c' (v . dv) and k', c' JAX's derivatives of _exp_coeffs,
+    # dk = 2 k' (v . dv), dc = 2 c' (v . dv) and k', c' JAX's derivatives of exp_coeffs,
     # computed once per rotation (JAX's own transpose of the code above was a scalar loop in
     # float64: a function outlined per component).
     (v,), ((dx, dy, dz),) = primals, tangents
     x, y, z = v
     t2 = x * x + y * y + z * z
-    (k, c), (dk2, dc2) = jax.jvp(_exp_coeffs, (t2,), (2 * jnp.ones_like(t2),))
+    (k, c), (dk2, dc2) = jax.jvp(exp_coeffs, (t2,), (2 * jnp.ones_like(t2),))
     vd = x * dx + y * dy + z * dz
     dk = dk2 * vd
     out = (k * dx + x * dk, k * dy + y * dk, k * dz + z * dk, dc2 * vd)
     return (k * x, k * y, k * z, c), out
 
 
-def _rotvec_scale(n2, w):
+def rotvec_scale(n2, w):
     """`k = 2 atan2(n, |w|) / n` (sign of `w` included, so that the angle is in [0, pi]) from
     `n^2 = |q_v|^2` and `w` of a prescaled quaternion: the rotation vector is `k q_v`.
 
@@ -100,10 +100,10 @@ def _rotvec_scale(n2, w):
     return (2 * sign) * inv_m * half
 
 
-def _quat_to_rotvec(q):
+def quat_to_rotvec(q):
     """Logarithm map of a scalar-last quaternion of any finite non-zero norm; angle in
-    [0, pi] (see `_rotvec_scale`): one vectorised loop, forward and reverse."""
-    return _scaled_vector_part(q, _rotvec_scale, False)
+    [0, pi] (see `rotvec_scale`): one vectorised loop, forward and reverse."""
+    return scaled_vector_part(q, rotvec_scale, False)
 
 
 @public
@@ -141,7 +141,7 @@ def rotvec_to_quaternion(
     check_shape(v, (3,), "rotvec")
     if degrees:
         v = jnp.deg2rad(v)
-    return cast(from_scalar_last(_rotvec_to_quat(v), scalar_first), dt)
+    return cast(from_scalar_last(rotvec_to_quat(v), scalar_first), dt)
 
 
 @public
@@ -174,7 +174,7 @@ def quaternion_to_rotvec(q: ArrayLike, degrees: bool = False, scalar_first: bool
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
-    v = _quat_to_rotvec(to_scalar_last(q, scalar_first))
+    v = quat_to_rotvec(to_scalar_last(q, scalar_first))
     if degrees:
         v = jnp.rad2deg(v)
     return cast(v, dt)
@@ -210,7 +210,7 @@ def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
     check_shape(v, (3,), "rotvec")
     if degrees:
         v = jnp.deg2rad(v)
-    k, c = _exp_coeffs(jnp.sum(v * v, axis=-1))
+    k, c = exp_coeffs(jnp.sum(v * v, axis=-1))
     # sin(t)/t = 2 k c and (1 - cos t)/t^2 = 2 k^2, both smooth in theta^2.
     a = (2 * k * c)[..., None, None]
     b = (2 * k * k)[..., None, None]
@@ -248,7 +248,7 @@ def matrix_to_rotvec(R: ArrayLike, degrees: bool = False) -> Array:
     """
     (R,), dt = as_float(R)
     check_shape(R, (3, 3), "R")
-    v = _quat_to_rotvec(_from_matrix(R, "shepperd"))
+    v = quat_to_rotvec(quat_from_matrix(R, "shepperd"))
     if degrees:
         v = jnp.rad2deg(v)
     return cast(v, dt)
@@ -321,7 +321,7 @@ def quaternion_to_axis_angle(
     """
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
-    q = _prescaled(to_scalar_last(q, scalar_first))
+    q = quat_prescaled(to_scalar_last(q, scalar_first))
     q = jnp.where(q[..., 3:] < 0, -q, q)
     qv = q[..., :3]
     # The vector part scaled on its own (a power of two), so that a tiny one (1e-160 next to
@@ -332,7 +332,7 @@ def quaternion_to_axis_angle(
     ident = (n == 0)[..., None]
     e_x = jnp.asarray([1.0, 0.0, 0.0], dtype=q.dtype)
     axis = jnp.where(ident, e_x, qv / jnp.where(ident, 1.0, n[..., None]))
-    angle = _angle(q)
+    angle = quat_angle(q)
     # NaN (not a valid-looking identity) for the zero quaternion or a non-finite component.
     axis = jnp.where(jnp.isnan(angle)[..., None], jnp.nan, axis)
     if degrees:

@@ -21,7 +21,7 @@ from jax.typing import ArrayLike
 
 from . import _numerics as nm
 from ._elementary import rsqrt
-from ._matrix import _shepperd_parts
+from ._matrix import shepperd_parts
 from ._numerics import (
     as_float,
     cast,
@@ -35,8 +35,8 @@ from ._numerics import (
     unstack,
     unstack_matrix,
 )
-from ._quaternion import _scaled_vector_parts, _to_matrix_parts
-from ._rotvec import _exp_coeffs, _rotvec_scale
+from ._quaternion import quat_to_matrix_parts, scaled_vector_parts
+from ._rotvec import exp_coeffs, rotvec_scale
 
 # --- power series in x = t^2 ------------------------------------------------------------------
 
@@ -131,7 +131,7 @@ def _so3_coeffs(p):
     """``(x, k, c, a, b)`` of a rotation vector (its three components): ``x = t^2``,
     ``k = sin(t/2)/t``, ``c = cos(t/2)``, ``a = (1 - cos t)/t^2``, ``b = (t - sin t)/t^3``."""
     x = sum_squares(p)
-    k, c = _exp_coeffs(x)
+    k, c = exp_coeffs(x)
     return x, k, c, 2 * k * k, _b_coeff(x, k, c)
 
 
@@ -139,7 +139,7 @@ def _inv_coeffs(p):
     """``(g, e)`` of the inverse Jacobians of a rotation vector (its three components):
     ``g = (t/2) cot(t/2)`` and ``e = (1 - g) / t^2``."""
     x = sum_squares(p)
-    k, c = _exp_coeffs(x)
+    k, c = exp_coeffs(x)
     g = c * (0.5 * _recip_k(k))
     return g, _series(x, _SERIES_E, lambda xb: (1 - g) * _recip(xb))
 
@@ -164,7 +164,7 @@ def log_parts(q, t):
     """``[p, Jl(p)^-1 t]`` with ``p = log(q)`` (angle in ``[0, pi]``) on components: ``q`` a
     quaternion of any non-zero norm (four parts), ``t`` three. The one SE(3) logarithm:
     :func:`se3_log` and ``RigidTransform.as_exp_coords``."""
-    p = list(_scaled_vector_parts(tuple(q), _rotvec_scale, False))
+    p = list(scaled_vector_parts(tuple(q), rotvec_scale, False))
     g, e = _inv_coeffs(p)
     return p + _combo_apply(g, -0.5 * jnp.ones_like(g), e, p, t)
 
@@ -400,7 +400,7 @@ def so3_right_jacobian_inverse(rotvec: ArrayLike) -> Array:
 def homogeneous(q, t, zero=None):
     """``[[R(q), t], [0, 1]]`` from the components of a unit quaternion ``q`` and of ``t``;
     ``zero``: the bottom row's zeros (default exact zeros)."""
-    e = unstack_matrix(_to_matrix_parts(*q))
+    e = unstack_matrix(quat_to_matrix_parts(*q))
     zero = jnp.zeros_like(t[0]) if zero is None else zero
     rows = [e[3 * i : 3 * i + 3] + [t[i]] for i in range(3)] + [[zero, zero, zero, zero + 1]]
     return stack_matrix(rows)
@@ -474,7 +474,7 @@ def se3_log(T: ArrayLike) -> Array:
     (T,), dt = as_float(T)
     check_shape(T, (4, 4), "T")
     e = unstack_matrix(T)  # T read once: R's nine entries and t's three
-    q = _shepperd_parts(tuple(e[4 * i + j] for i in range(3) for j in range(3)))
+    q = shepperd_parts(tuple(e[4 * i + j] for i in range(3) for j in range(3)))
     return cast(stack(log_parts(q, [e[3], e[7], e[11]])), dt)
 
 

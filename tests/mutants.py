@@ -54,8 +54,8 @@ MUTANTS = {
     ),
     "apply_norm": (
         "rotjax/_quaternion.py",
-        "d = _turn([x * r for x in p], v)",
-        "d = _turn(p, v)",
+        "d = quat_turn([x * r for x in p], v)",
+        "d = quat_turn(p, v)",
         1,
     ),
     "adjoint": (

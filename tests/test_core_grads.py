@@ -547,7 +547,7 @@ def test_shepperd_hand_written_derivative_equals_autodiff_of_its_formula(which):
     import rotjax._matrix
 
     _shepperd = getattr(rotjax._matrix, which)
-    ref = undecorated(rotjax._matrix._shepperd_parts, matrix=(0,))
+    ref = undecorated(rotjax._matrix.shepperd_parts, matrix=(0,))
     rng = np.random.default_rng(11)
     base = np.stack(
         [SPECIAL_MATRICES[k] for k in sorted(SPECIAL_MATRICES)]
@@ -628,7 +628,7 @@ def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
     """rotvec_to_quaternion's custom jvp (and its transpose, and second derivatives) equals
     JAX's own derivative of the forward code: the zero vector, the Taylor branch and its edge,
     angles near and at pi, 2 pi and beyond, in both dtypes."""
-    from rotjax._rotvec import _rotvec_to_quat, _rotvec_to_quat_parts
+    from rotjax._rotvec import _rotvec_to_quat_parts, rotvec_to_quat
 
     ref = undecorated(_rotvec_to_quat_parts)
 
@@ -642,17 +642,17 @@ def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
     for dtype, tol in ((jnp.float64, 1e-14), (jnp.float32, 2e-6)):
         v = jnp.asarray(axes * angles[:, None], dtype)
         dv = jnp.asarray(rng.normal(size=v.shape), dtype)
-        out, jv = jit(lambda x, t: jax.jvp(_rotvec_to_quat, (x,), (t,)))(v, dv)
+        out, jv = jit(lambda x, t: jax.jvp(rotvec_to_quat, (x,), (t,)))(v, dv)
         out_ref, jv_ref = jit(lambda x, t: jax.jvp(ref, (x,), (t,)))(v, dv)
         np.testing.assert_array_equal(out, out_ref)
         assert jv.dtype == dtype
         assert_close(jv, jv_ref, atol=tol)
         ct = jnp.asarray(rng.normal(size=out.shape), dtype)
-        g = jit(jax.grad(lambda x: jnp.sum(ct * _rotvec_to_quat(x))))(v)
+        g = jit(jax.grad(lambda x: jnp.sum(ct * rotvec_to_quat(x))))(v)
         g_ref = jit(jax.grad(lambda x: jnp.sum(ct * ref(x))))(v)
         assert np.all(np.isfinite(np.asarray(g)))
         assert_close(g, g_ref, atol=tol * (1 + float(jnp.abs(g_ref).max())))
-    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (_rotvec_to_quat, ref))
+    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (rotvec_to_quat, ref))
     for x in (jnp.zeros(3), jnp.asarray(axes[0] * 1e-5), jnp.asarray(axes[1] * 2.0)):
         h, h_ref = hess(x), hess_ref(x)
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
@@ -672,15 +672,15 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
     (the switch between the two atan forms)."""
     from rotjax._elementary import atan_ratio as _atan_ratio
     from rotjax._mrp import _mrp_scale
-    from rotjax._quaternion import _scaled_vector_part, _scaled_vector_parts
-    from rotjax._rotvec import _rotvec_scale
+    from rotjax._quaternion import scaled_vector_part, scaled_vector_parts
+    from rotjax._rotvec import rotvec_scale
 
-    k_of, with_w = {"rotvec": (_rotvec_scale, False), "mrp": (_mrp_scale, True)}[which]
+    k_of, with_w = {"rotvec": (rotvec_scale, False), "mrp": (_mrp_scale, True)}[which]
 
-    def _quat_to_rotvec(q):
-        return _scaled_vector_part(q, k_of, with_w)
+    def quat_to_rotvec(q):
+        return scaled_vector_part(q, k_of, with_w)
 
-    _quat_to_rotvec.fun = undecorated(_scaled_vector_parts, k_of, with_w)
+    quat_to_rotvec.fun = undecorated(scaled_vector_parts, k_of, with_w)
 
     rng = np.random.default_rng(23)
     special = [
@@ -691,21 +691,21 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
     q = jnp.asarray(q * np.exp(rng.uniform(-46, 46, size=(len(q), 1))))
     dq = jnp.asarray(rng.normal(size=q.shape)) * jnp.linalg.norm(q, axis=-1, keepdims=True)
     jit = jax.jit
-    out, jv = jit(lambda x, t: jax.jvp(_quat_to_rotvec, (x,), (t,)))(q, dq)
-    out_ref, jv_ref = jit(lambda x, t: jax.jvp(_quat_to_rotvec.fun, (x,), (t,)))(q, dq)
+    out, jv = jit(lambda x, t: jax.jvp(quat_to_rotvec, (x,), (t,)))(q, dq)
+    out_ref, jv_ref = jit(lambda x, t: jax.jvp(quat_to_rotvec.fun, (x,), (t,)))(q, dq)
     np.testing.assert_array_equal(out, out_ref)
     scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
     assert_close(jv / scale, jv_ref / scale, atol=1e-14)
     ct = jnp.asarray(rng.normal(size=out.shape))
     grad, grad_ref = (
         jit(jax.grad(lambda x, c, fn=fn: jnp.sum(c * fn(x))))
-        for fn in (_quat_to_rotvec, _quat_to_rotvec.fun)
+        for fn in (quat_to_rotvec, quat_to_rotvec.fun)
     )
     g, g_ref = grad(q, ct), grad_ref(q, ct)
     assert np.all(np.isfinite(np.asarray(g)))
     scale = np.abs(np.asarray(g_ref)).max(axis=-1, keepdims=True)
     assert_close(g / scale, g_ref / scale, atol=1e-14)
-    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (_quat_to_rotvec, _quat_to_rotvec.fun))
+    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (quat_to_rotvec, quat_to_rotvec.fun))
     for x in (q[-1] / jnp.linalg.norm(q[-1]), q[2], q[3]):  # generic, near identity, 180 degrees
         h, h_ref = hess(x), hess_ref(x)
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
@@ -799,7 +799,7 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     """quaternion_to_euler's custom jvp (and its transpose) equals JAX's own derivative of the
     forward code, everywhere: generic points of any norm, near and exactly at lock (where the
     forward code's selects define the gradient rule), 180 degrees; second derivatives too."""
-    from rotjax._euler import _quat_to_euler, _quat_to_euler_parts
+    from rotjax._euler import _quat_to_euler_parts, quat_to_euler
 
     ref = undecorated(_quat_to_euler_parts, seq)
 
@@ -811,7 +811,7 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     _assert_rule_equals_autodiff(rule, ref, q, dq, ct)
     # second derivatives, compiled once for both points: generic, exact lock (the rule's by
     # JAX's hessian, forward over reverse; the reference's forward over forward)
-    hess = jax.jit(jax.hessian(lambda x: _quat_to_euler(x, seq)))
+    hess = jax.jit(jax.hessian(lambda x: quat_to_euler(x, seq)))
     hess_ref = jax.jit(jax.jacfwd(jax.jacfwd(ref)))
     for x in (q[0] / np.linalg.norm(q[0]), q[-4]):
         h, h_ref = hess(jnp.asarray(x)), hess_ref(jnp.asarray(x))

@@ -261,7 +261,7 @@ def test_nearest_rotation_is_the_matrix_of_nearest_quaternion(dtype):
     matrix of the kernel's quaternion: the two agree to rounding (ties, rank deficiency and
     ``det < 0`` included), and so do their derivatives."""
     from rotjax._eigen import nearest_quaternion, nearest_rotation
-    from rotjax._quaternion import _to_matrix
+    from rotjax._quaternion import quat_to_matrix
 
     rng = np.random.default_rng(41)
     R = Rotation.random(64, random_state=41).as_matrix()
@@ -277,7 +277,7 @@ def test_nearest_rotation_is_the_matrix_of_nearest_quaternion(dtype):
     ).astype(dtype)
 
     def via_q(B):
-        return _to_matrix(nearest_quaternion(B))
+        return quat_to_matrix(nearest_quaternion(B))
 
     # both in one program, and both tangents in one: the kernel's run is shared within each
     Q, Qq = jax.jit(lambda B: (nearest_rotation(B), via_q(B)))(B)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from rotjax._elementary import rsqrt
-from rotjax._matrix import _selected_column
+from rotjax._matrix import selected_column
 from rotjax._numerics import exponent_scale
 
 # Exponent ranges of normal numbers, and the documented accuracy of rsqrt.
@@ -56,7 +56,7 @@ def test_selected_column_norm_is_in_rsqrt_domain_for_any_finite_matrix(R):
     """rsqrt's domain in matrix_to_quaternion: after the power-of-two prescaling the selected
     column's squared norm is at least t^2 >= 1/12 and bounded, at any scale; NaN for zero.
     XLA flushes subnormals to zero, so a matrix of subnormal entries only is the zero matrix."""
-    _, sq = _selected_column(jnp.asarray(R))
+    _, sq = selected_column(jnp.asarray(R))
     if not np.any(np.abs(R) >= np.finfo(np.float64).tiny):
         assert np.isnan(float(sq))
     else:

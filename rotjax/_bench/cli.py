@@ -76,7 +76,7 @@ def _report(argv) -> int:
     return 1 if args.check and stale else 0
 
 
-def _versions():
+def package_versions():
     import importlib.metadata as md
     import platform
 
@@ -92,7 +92,7 @@ def _versions():
     return out
 
 
-def _commit():
+def commit_id():
     """The git commit of the measured rotjax ("+changes" where its files differ from it), or
     None outside a git checkout."""
     root = Path(__file__).resolve().parents[2]
@@ -223,8 +223,8 @@ def main(argv: list[str] | None = None) -> int:
             "machine": machine(),
             "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}",
             "jax": jax.__version__,
-            "versions": _versions(),
-            "commit": _commit(),
+            "versions": package_versions(),
+            "commit": commit_id(),
             "quick": args.quick,
             "batch": 1
             << (args.log2_batch if args.log2_batch is not None else (16 if args.quick else 20)),

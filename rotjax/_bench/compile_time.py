@@ -51,11 +51,11 @@ def _program(found, group, name, contender, dtype):
 
     rng = np.random.default_rng(0)
     if group == "pipeline":
-        from .pipelines import _args, _inputs, pipelines
+        from .pipelines import contender_args, pipeline_inputs, pipelines
 
         keys, contenders = pipelines(found)[name]
-        data = {k: jnp.asarray(v, dtype) for k, v in _inputs(rng, BATCH).items()}
-        return contenders[contender], _args(contender, keys, data), True
+        data = {k: jnp.asarray(v, dtype) for k, v in pipeline_inputs(rng, BATCH).items()}
+        return contenders[contender], contender_args(contender, keys, data), True
     from .cases import CASES, INPUTS
 
     case = CASES[name]
@@ -202,7 +202,7 @@ def _meta() -> dict:
 
     import jax
 
-    from .cli import _commit
+    from .cli import commit_id
 
     cpu = platform.processor() or platform.machine()
     try:
@@ -214,7 +214,7 @@ def _meta() -> dict:
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "cpu": f"{cpu}, {os.cpu_count()} cores",
         "jax": jax.__version__,
-        "commit": _commit(),
+        "commit": commit_id(),
         "batch": BATCH,
     }
 

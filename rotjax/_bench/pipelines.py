@@ -30,7 +30,7 @@ DEFAULT_JSON = "docs/bench-pipelines.json"
 SEQ = "xyz"  # jaxlie's roll-pitch-yaw
 
 
-def _inputs(rng, n):
+def pipeline_inputs(rng, n):
     """Unit quaternions, rotation vectors, rotation matrices, Euler angles, vectors and
     translations, float64 (``n`` of each)."""
     q = rng.normal(size=(n, 4))
@@ -196,7 +196,7 @@ def pipelines(peers):
 _QUATERNION_KEYS = ("q", "p")
 
 
-def _args(contender, keys, data):
+def contender_args(contender, keys, data):
     """The inputs of ``keys`` as the contender takes them: jaxlie's quaternions scalar first."""
     import jax.numpy as jnp
 
@@ -245,14 +245,14 @@ def measure(log2_batch=18, rounds=9, dtypes=("float32", "float64"), seed=0):
 
     found = find_peers()
     rng = np.random.default_rng(seed)
-    raw = _inputs(rng, 1 << log2_batch)
+    raw = pipeline_inputs(rng, 1 << log2_batch)
     rows = []
     for name, (keys, contenders) in pipelines(found).items():
         for dt in dtypes:
             data = {k: jnp.asarray(v, dt) for k, v in raw.items()}
             entries, compile_s, byte_ratio = {}, {}, {}
             for c, f in contenders.items():
-                args = _args(c, keys, data)
+                args = contender_args(c, keys, data)
                 g = _grad(f)
                 compile_s[c] = (_compile_seconds(f, args), _compile_seconds(g, args))
                 if c.startswith("rotjax"):
@@ -293,7 +293,7 @@ def measure(log2_batch=18, rounds=9, dtypes=("float32", "float64"), seed=0):
 def _meta(log2_batch, rounds):
     import jax
 
-    from .cli import _commit, _versions
+    from .cli import commit_id, package_versions
 
     try:
         cpu = next(
@@ -309,8 +309,8 @@ def _meta(log2_batch, rounds):
         "device": str(jax.devices()[0].device_kind),
         "batch": 1 << log2_batch,
         "rounds": rounds,
-        "commit": _commit(),
-        "versions": _versions(),
+        "commit": commit_id(),
+        "versions": package_versions(),
     }
 
 
