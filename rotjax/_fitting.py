@@ -26,6 +26,7 @@ from ._elementary import atan2
 from ._numerics import (
     FULL,
     as_float,
+    axial,
     broadcast_batch,
     cast,
     check_shape,
@@ -36,7 +37,6 @@ from ._numerics import (
     public,
     safe_norm,
     to_scalar_last,
-    vee,
 )
 from ._quaternion import quat_conjugate, quat_multiply, quat_normalize
 from ._rotvec import quat_to_rotvec, rotvec_to_quat
@@ -166,7 +166,7 @@ def geodesic_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
     R_a, R_b, dt = _prep_pair(R_a, R_b)
     M = matmul(_mT(R_a), R_b)
     c = 0.5 * (jnp.trace(M, axis1=-2, axis2=-1) - 1)
-    s = safe_norm(vee(M))
+    s = safe_norm(axial(M))
     # atan2 of an infinite sine is a finite pi/2: an infinite component gives NaN instead.
     return cast(jnp.where(jnp.isfinite(s) & jnp.isfinite(c), atan2(s, c), jnp.nan), dt)
 

@@ -299,16 +299,16 @@ def cross(a, b):
     return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def hat(v):
-    """Skew-symmetric matrix `[v]x` with `hat(v) @ u == cross(v, u)`; shape `(..., 3, 3)`."""
+def skew(v):
+    """Skew-symmetric matrix `[v]x` with `skew(v) @ u == cross(v, u)`; shape `(..., 3, 3)`."""
     x, y, z = jnp.moveaxis(v, -1, 0)
     o = jnp.zeros_like(x)
     rows = ((o, -z, y), (z, o, -x), (-y, x, o))
     return stack_matrix(rows)
 
 
-def vee(m):
-    """Inverse of `hat` on the antisymmetric part of `m`: `(..., 3, 3) -> (..., 3)`."""
+def axial(m):
+    """Axial vector of the antisymmetric part of `m` (the inverse of `skew`): `(..., 3)`."""
     return 0.5 * jnp.stack(
         [m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]],
         axis=-1,

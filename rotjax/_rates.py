@@ -32,18 +32,18 @@ from jax.typing import ArrayLike
 from ._euler import parse_seq
 from ._numerics import (
     as_float,
+    axial,
     cast,
     check_shape,
     cross,
     from_scalar_last,
-    hat,
     matmul,
     matvec,
     max_abs,
     public,
+    skew,
     to_scalar_last,
     unit_scale,
-    vee,
 )
 from ._quaternion import quat_conjugate, quat_multiply
 
@@ -446,7 +446,7 @@ def matrix_derivative_to_angular_velocity(
     check_shape(Rd, (3, 3), "R_dot")
     check_frame(frame)
     Rt = jnp.swapaxes(R, -1, -2)
-    return cast(vee(matmul(Rt, Rd) if frame == "body" else matmul(Rd, Rt)), dt)
+    return cast(axial(matmul(Rt, Rd) if frame == "body" else matmul(Rd, Rt)), dt)
 
 
 @public
@@ -479,7 +479,7 @@ def angular_velocity_to_matrix_derivative(
     check_shape(R, (3, 3), "R")
     check_shape(w, (3,), "omega")
     check_frame(frame)
-    W = hat(w)
+    W = skew(w)
     return cast((matmul(R, W) if frame == "body" else matmul(W, R)), dt)
 
 

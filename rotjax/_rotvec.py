@@ -17,12 +17,12 @@ from ._numerics import (
     eps,
     exponent_scale,
     from_scalar_last,
-    hat,
     like_rank,
     matmul,
     public,
     safe_norm,
     select,
+    skew,
     stack,
     to_scalar_last,
     unstack,
@@ -214,7 +214,7 @@ def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
     # sin(t)/t = 2 k c and (1 - cos t)/t^2 = 2 k^2, both smooth in theta^2.
     a = (2 * k * c)[..., None, None]
     b = (2 * k * k)[..., None, None]
-    K = hat(v)
+    K = skew(v)
     eye = like_rank(jnp.eye(3, dtype=v.dtype), K)
     return cast((eye + a * K + b * matmul(K, K)), dt)
 

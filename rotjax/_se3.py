@@ -195,7 +195,7 @@ def _q_matrix(p, r):
     d = _series(x, _SERIES_D, lambda xb: (1 - 4 * k * k) / (2 * xb))
     # 2 - 3 sin t / t + cos t, with sin t / t = 2 k c and cos t = c^2 - (k t)^2.
     f = _series(x, _SERIES_F, lambda xb: (2 - 6 * k * c + c * c - k * k * xb) / (2 * xb * xb))
-    P, R = nm.hat(p), nm.hat(r)
+    P, R = nm.skew(p), nm.skew(r)
     PR, RP = matmul(P, R), matmul(R, P)
     PRP = matmul(PR, P)
     PPR, RPP = matmul(P, PR), matmul(RP, P)
@@ -242,8 +242,8 @@ def hat(v: ArrayLike) -> Array:
     if v.ndim < 1 or v.shape[-1] not in (3, 6):
         raise ValueError(f"v: expected shape (..., 3) or (..., 6), got {tuple(v.shape)}")
     if v.shape[-1] == 3:
-        return cast(nm.hat(v), dt)
-    top = jnp.concatenate([nm.hat(v[..., :3]), v[..., 3:, None]], axis=-1)
+        return cast(nm.skew(v), dt)
+    top = jnp.concatenate([nm.skew(v[..., :3]), v[..., 3:, None]], axis=-1)
     out = jnp.concatenate([top, jnp.zeros_like(top[..., :1, :])], axis=-2)
     return cast(out, dt)
 
@@ -273,7 +273,7 @@ def vee(M: ArrayLike) -> Array:
     (M,), dt = as_float(M)
     if M.ndim < 2 or M.shape[-2:] not in ((3, 3), (4, 4)):
         raise ValueError(f"M: expected shape (..., 3, 3) or (..., 4, 4), got {tuple(M.shape)}")
-    w = nm.vee(M[..., :3, :3])
+    w = nm.axial(M[..., :3, :3])
     if M.shape[-1] == 4:
         w = jnp.concatenate([w, M[..., :3, 3]], axis=-1)
     return cast(w, dt)
@@ -505,7 +505,7 @@ def se3_adjoint(T: ArrayLike) -> Array:
     (T,), dt = as_float(T)
     check_shape(T, (4, 4), "T")
     R, t = T[..., :3, :3], T[..., :3, 3]
-    return cast(_blocks(R, matmul(nm.hat(t), R), R), dt)
+    return cast(_blocks(R, matmul(nm.skew(t), R), R), dt)
 
 
 @public

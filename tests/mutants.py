@@ -60,8 +60,8 @@ MUTANTS = {
     ),
     "adjoint": (
         "rotjax/_se3.py",
-        "_blocks(R, matmul(nm.hat(t), R), R)",
-        "_blocks(R, matmul(R, nm.hat(t)), R)",
+        "_blocks(R, matmul(nm.skew(t), R), R)",
+        "_blocks(R, matmul(R, nm.skew(t)), R)",
         1,
     ),
 }

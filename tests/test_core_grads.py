@@ -20,7 +20,7 @@ from jax.test_util import check_jvp, check_vjp
 
 import rotjax as rj
 from rotjax._euler import parse_seq
-from rotjax._numerics import hat
+from rotjax._numerics import skew
 
 Q = random_quaternions(3, seed=31)
 OMEGAS = np.array([[1.0, 0, 0], [0, 1, 0], [0, 0, 1], [0.3, -0.7, 0.2]])
@@ -300,7 +300,7 @@ def test_check_grads_euler_generic(seq):
     _check_grads_euler("quaternion_to_euler", seq, q)
     # d angles along R omega^ equals central differences along R exp(t omega^)
     R = _euler("euler_to_matrix", seq, a[None])[0]
-    dR = R @ np.asarray(hat(OMEGAS))
+    dR = R @ np.asarray(skew(OMEGAS))
     _, jvp, _ = _euler("matrix_to_euler", seq, np.broadcast_to(R, dR.shape), dR)
     h = 1e-6
     steps = np.asarray(rj.rotvec_to_matrix(np.concatenate([h * OMEGAS, -h * OMEGAS])))
@@ -328,7 +328,7 @@ def test_log_map_jacobian_at_identity_is_two_identity():
 def test_rotvec_to_matrix_jacobian_at_zero_is_hat():
     J = np.asarray(jax.jacfwd(rj.rotvec_to_matrix)(jnp.zeros(3)))
     for k in range(3):
-        np.testing.assert_array_equal(J[..., k], np.asarray(hat(jnp.eye(3)[k])))
+        np.testing.assert_array_equal(J[..., k], np.asarray(skew(jnp.eye(3)[k])))
 
 
 @pytest.mark.parametrize("scale", [1e-9, 1e-5, 1e-2])
@@ -375,7 +375,7 @@ def test_matrix_to_quaternion_tangent_derivative(name, method):
     R = SPECIAL_MATRICES[name]
     f = lambda m: rj.matrix_to_quaternion(m, method=method)  # noqa: E731
     for omega in OMEGAS:
-        _, jvp = jax.jvp(f, (jnp.asarray(R),), (jnp.asarray(R @ np.asarray(hat(omega))),))
+        _, jvp = jax.jvp(f, (jnp.asarray(R),), (jnp.asarray(R @ np.asarray(skew(omega))),))
         q = np.asarray(f(R))
         # exact tangent identity dq = q (x) (omega/2, 0) for a unit q
         expected = np.asarray(rj.quaternion_multiply(q, np.array([*(omega / 2), 0.0])))
@@ -412,7 +412,7 @@ def test_matrix_to_rotvec_tangent_derivative(name):
     R omega^; at the identity d log = omega exactly."""
     R = SPECIAL_MATRICES[name]
     for omega in OMEGAS:
-        dR = R @ np.asarray(hat(omega))
+        dR = R @ np.asarray(skew(omega))
         _, jvp = jax.jvp(
             lambda m: rj.rotvec_to_matrix(rj.matrix_to_rotvec(m)),
             (jnp.asarray(R),),
@@ -521,7 +521,7 @@ def test_euler_gradients_near_lock_are_true_derivatives(seq):
     R -> angles -> R is the identity on tangent vectors (values ~1e9 cancel correctly)."""
     mid = 1e-9 if is_proper(seq) else np.pi / 2 - 1e-9
     R = _euler("euler_to_matrix", seq, np.array([[0.4, mid, -1.3]]))[0]
-    dR = R @ np.asarray(hat(OMEGAS))
+    dR = R @ np.asarray(skew(OMEGAS))
     Rs = np.broadcast_to(R, dR.shape)
     # the chain rule through the two programs: d(euler_to_matrix)(angles; d angles)
     ang, dang, g = _euler("matrix_to_euler", seq, Rs, dR, np.ones((len(dR), 3)))

@@ -489,7 +489,7 @@ def test_derivative_at_identity_is_the_hat_map():
         e = np.zeros(6)
         e[i] = 1
         expect = np.zeros((4, 4))
-        expect[:3, :3] = np.asarray(rj._numerics.hat(jnp.asarray(e[:3])))
+        expect[:3, :3] = np.asarray(rj._numerics.skew(jnp.asarray(e[:3])))
         expect[:3, 3] = e[3:]
         assert_close(jac[..., i], expect, atol=0)
 
