@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from ._elementary import rsqrt
-from ._numerics import TIE_ULPS, eps, max_abs, safe_div, select
+from ._numerics import TIE_ULPS, eps, exponent_scale, max_abs, safe_div, select
 from ._quaternion import quat_multiply, quat_to_matrix
 from ._shepperd import k4_columns, masks_once, select_column
 
@@ -62,28 +62,17 @@ def _schedule(dtype):
 def _pow2_factors(m):
     """Two exact powers of two per batch element, `(f0, f1)`, such that `m * f0 * f1` lies in
     `[1/2, 1)` for `m` the largest `|entry|` of each batch element; NaN where `m` is not
-    finite, 1 where `m = 0`. Applied one after the other (their product can overflow).
-
-    `m` is first brought within `2^+-k` (`k` half the exponent range) by a constant power
-    of two `f0`, then `2^E` of the result, read from its exponent bits, is inverted by one
-    division, exact for a power of two. Both factors come from that one quotient, so XLA
-    computes them once per batch element, in a loop of their own, and each scaled entry costs
-    two multiplications (`frexp` and `ldexp` are chains of cheap operations that XLA would
-    repeat for each entry of every loop that reads the scaled array)."""
+    finite. Applied one after the other (their product can overflow): `f0` brings `m` within
+    `2^+-k` (`k` half the exponent range), `f1` is `exponent_scale` of the result, halved."""
     dt = m.dtype
-    info = jnp.finfo(dt)
-    uint = jnp.uint32 if dt == jnp.float32 else jnp.uint64
     m = jax.lax.stop_gradient(m)  # the factors are constants: the derivative is x's times them
-    k = float(2 ** (info.nexp - 2))  # 2^k, 2^-k, and their products with 2^E stay normal
+    k = float(2 ** (jnp.finfo(dt).nexp - 2))  # 2^k, 2^-k, and their products with 2^E stay normal
     big, small = jnp.asarray(2.0**k, dt), jnp.asarray(2.0**-k, dt)
     c = jnp.where(m > big, small, jnp.where(m < small, big, 1.0))
     mc = m * c
-    exp_bits = jnp.asarray(((1 << info.nexp) - 1) << info.nmant, uint)
-    p = jax.lax.bitcast_convert_type(jax.lax.bitcast_convert_type(mc, uint) & exp_bits, dt)
+    s, _ = exponent_scale(mc)
     nan = select(jnp.isfinite(m), 1.0, jnp.nan, dt)
-    den = jnp.where((mc > 0) & jnp.isfinite(mc), p, 1.0)
-    f = jnp.stack([c * nan, 0.5 * nan], -1) / jnp.stack([jnp.ones_like(den), den], -1)
-    return f[..., 0], f[..., 1]
+    return c * nan, 0.5 * jnp.where(mc > 0, s, 1.0) * nan
 
 
 def pow2_factors(x, axes):
