@@ -1,8 +1,9 @@
 """`RigidTransform`: scipy's rigid-transform API over rotjax's functions, as a pytree.
 
-The class holds two arrays, the `(..., 4)` scalar-last unit quaternion of the rotation and
-the `(..., 3)` translation, so that `T v = R v + t`; every computation is one jitted
-function of those arrays, built on rotjax's quaternion and rotation-vector functions.
+The class holds two arrays, the `(..., 4)` scalar-last quaternion of the rotation (any
+non-zero norm, as `Rotation` holds it) and the `(..., 3)` translation, so that
+`T v = R v + t`; every computation is one jitted function of those arrays, built on rotjax's
+quaternion and rotation-vector functions.
 """
 
 from __future__ import annotations
@@ -30,7 +31,12 @@ from ._numerics import (
     unit_scale,
     unstack,
 )
-from ._quaternion import quat_conjugate, quat_multiply, quat_renormalize, quat_to_matrix, quat_turn
+from ._quaternion import (
+    quat_conjugate,
+    quat_multiply,
+    quat_to_matrix,
+    quat_turn,
+)
 from ._rotation import (
     BatchedPytree,
     Rotation,
@@ -95,7 +101,7 @@ def _as_matrix(q, t):
 @jit
 def _pose_compose(q1, t1, q2, t2):
     q1, t1, q2, t2 = broadcast_batch(q1, t1, q2, t2)
-    return quat_renormalize(quat_multiply(q1, q2)), t1 + _rotate(q1, t2)
+    return quat_multiply(q1, q2), t1 + _rotate(q1, t2)
 
 
 @jit
@@ -238,12 +244,12 @@ class RigidTransform(BatchedPytree):
     `T v = R v + t`: a rotation `R` followed by a translation `t`; as a matrix
     `[[R, t], [0, 1]]` acting on `[v, 1]`. `p * q` applies `q` first.
 
-    A `RigidTransform` is a pytree of two leaves, the `(..., 4)` unit quaternion of `R` (scalar
-    last) and the `(..., 3)` translation, with no other data: every constructor gives the same
-    tree structure, `jax.jit` takes and returns it, `jax.vmap` maps over its batch axes,
-    `lax.scan` carries it and `jax.grad` differentiates through every method. A transform with
-    `(4,)` and `(3,)` leaves is *single* (no `len`, no indexing); otherwise `shape` is the batch
-    shape. float32 and float64 are kept.
+    A `RigidTransform` is a pytree of two leaves, the `(..., 4)` quaternion of `R` (scalar last, any
+    non-zero norm, as a `Rotation` holds it) and the `(..., 3)` translation, with no other data:
+    every constructor gives the same tree structure, `jax.jit` takes and returns it, `jax.vmap` maps
+    over its batch axes, `lax.scan` carries it and `jax.grad` differentiates through every method. A
+    transform with `(4,)` and `(3,)` leaves is *single* (no `len`, no indexing); otherwise `shape`
+    is the batch shape. float32 and float64 are kept.
 
     Exponential coordinates are scipy's `[rotation vector, v]` (rotation first):
     `exp([phi, v]) = (exp(phi), J(phi) v)` with `J` the left Jacobian of SO(3). Their
@@ -276,8 +282,11 @@ class RigidTransform(BatchedPytree):
         ```
     """
 
-    __slots__ = ("_quat", "_translation")
-    _LEAVES = ("_quat", "_translation")
+    # The leaves: the rotation's quaternion (any non-zero norm, as Rotation stores it) and
+    # the translation; the methods read the unit ``_quat``, so a normalisation happens where a
+    # value is read (fused into that program), not where one is stored.
+    __slots__ = ("_stored", "_translation")
+    _LEAVES = ("_stored", "_translation")
     _NOUN = "transform"
 
     def __init__(self, matrix: ArrayLike, normalize: bool = True, copy: bool = True):
@@ -295,13 +304,14 @@ class RigidTransform(BatchedPytree):
                 )
             if m.size and np.any(np.linalg.det(m[..., :3, :3]) <= 0):
                 raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
-        self._quat, self._translation = _pose_from_matrix(m, normalize=bool(normalize))
+        self._stored, self._translation = _pose_from_matrix(m, normalize=bool(normalize))
 
     @classmethod
     def _raw(cls, quat, translation) -> RigidTransform:
-        """A transform holding a unit quaternion and a translation as they are (no check)."""
+        """A transform holding a quaternion (any non-zero norm) and a translation as they are
+        (no check)."""
         tf = object.__new__(cls)
-        tf._quat = quat
+        tf._stored = quat
         tf._translation = translation
         return tf
 
@@ -310,7 +320,7 @@ class RigidTransform(BatchedPytree):
     @property
     def rotation(self) -> Rotation:
         """The rotation part, a [`Rotation`][rotjax.Rotation] of shape `shape`."""
-        return Rotation._raw(self._quat)
+        return Rotation._raw(self._stored)
 
     @property
     def translation(self) -> Array:
@@ -372,7 +382,7 @@ class RigidTransform(BatchedPytree):
             raise TypeError(
                 f"Expected `rotation` to be a `Rotation` instance, got {type(rotation)}."
             )
-        q = rotation.as_quat()
+        q = rotation._stored
         return RigidTransform._raw(q, jnp.zeros(q.shape[:-1] + (3,), q.dtype))
 
     @staticmethod
@@ -428,7 +438,7 @@ class RigidTransform(BatchedPytree):
             )
         t = float_array(translation)
         _check_last(t, 3, "translation")
-        q, t = _common(rotation.as_quat(), t)
+        q, t = _common(rotation._stored, t)
         try:
             q, t = broadcast_batch(q, t)
         except ValueError:
@@ -558,11 +568,11 @@ class RigidTransform(BatchedPytree):
             ```
         """
         if isinstance(transforms, RigidTransform):
-            return RigidTransform._raw(transforms._quat, transforms._translation)
+            return RigidTransform._raw(transforms._stored, transforms._translation)
         transforms = list(transforms)
         if not all(isinstance(x, RigidTransform) for x in transforms):
             raise TypeError("input must contain RigidTransform objects only")
-        q = _common(*(jnp.atleast_2d(x._quat) for x in transforms))
+        q = _common(*(jnp.atleast_2d(x._stored) for x in transforms))
         t = _common(*(jnp.atleast_2d(x._translation) for x in transforms))
         return RigidTransform._raw(jnp.concatenate(q), jnp.concatenate(t))
 
@@ -733,7 +743,7 @@ class RigidTransform(BatchedPytree):
             e = e[0]
         if e.ndim != 0:
             raise ValueError("Array exponent must be a scalar")
-        e = jnp.broadcast_to(e.astype(self._quat.dtype), self.shape)
+        e = jnp.broadcast_to(e.astype(self._stored.dtype), self.shape)
         return RigidTransform._raw(*_pow(self._quat, self._translation, e))
 
     def inv(self) -> RigidTransform:
@@ -771,7 +781,7 @@ class RigidTransform(BatchedPytree):
             # [2. 3. 4.] [ 0. -1. -2.]
             ```
         """
-        dtype = self._quat.dtype
+        dtype = self._stored.dtype
         host = host_value(vector)
         v = host.astype(dtype) if host is not None else float_array(vector, dtype)
         if v.ndim < 1 or v.shape[-1] != 3:

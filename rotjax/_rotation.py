@@ -163,7 +163,9 @@ class BatchedPytree:
     """The batch bookkeeping shared by `Rotation` and `RigidTransform`: the object is its
     leaves (`_LEAVES`, arrays with the batch axes first and one trailing axis each), the first
     batch axis is scipy's sequence, and a single element (no batch axes) has no length, is not
-    iterable and not subscriptable. A subclass defines `_LEAVES`, `_NOUN` and `_raw(*leaves)`."""
+    iterable and not subscriptable. A subclass defines `_LEAVES`, `_NOUN` and `_raw(*leaves)`;
+    its first leaf `_stored` is the quaternion of the rotation (scalar last, any non-zero norm),
+    read normalised as `_quat`."""
 
     __slots__ = ()
     _NOUN = "element"
@@ -171,6 +173,11 @@ class BatchedPytree:
 
     def _leaves(self):
         return tuple(getattr(self, name) for name in self._LEAVES)
+
+    @property
+    def _quat(self):
+        """The unit quaternion of the rotation, scalar last."""
+        return quaternion_normalize(self._stored)
 
     # --- pytree and pickling ---------------------------------------------------------------
 
@@ -337,11 +344,6 @@ class Rotation(BatchedPytree):
         r = object.__new__(cls)
         r._stored = quat
         return r
-
-    @property
-    def _quat(self):
-        """The unit quaternion, scalar last."""
-        return quaternion_normalize(self._stored)
 
     # --- shape ---------------------------------------------------------------------------
 
