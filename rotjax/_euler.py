@@ -11,7 +11,7 @@ from jax import Array
 from jax.typing import ArrayLike
 
 from ._elementary import atan2, rsqrt, scaled_pair, sin_cos
-from ._matrix import column_tangent, selected_column
+from ._matrix import selected_column
 from ._numerics import (
     as_float,
     cast,
@@ -315,24 +315,12 @@ def _matrix_to_euler(R, seq):
     return stack(_matrix_to_euler_parts(tuple(entries(R)), seq), branches=True)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def _matrix_to_euler_parts(R, seq):
     """quaternion_to_euler's extraction of the Shepperd column: the angles do not depend on the
     quaternion's norm or sign, so the column needs no normalisation (NaN for a non-rotation,
-    through its diagonal). The rule below is JAX's derivative of this code (tested)."""
+    through its diagonal)."""
     c, _ = selected_column(R)
     return _quat_to_euler_parts(tuple(c), seq)
-
-
-@_matrix_to_euler_parts.defjvp
-def _matrix_to_euler_parts_jvp(seq, primals, tangents):
-    # The column's derivative, then quaternion_to_euler's rule (its exact derivative). The
-    # column is written once (the barrier): the rule's loops read it instead of each
-    # extracting it again from R.
-    (R,), (dR,) = primals, tangents
-    c, dc = column_tangent(R, dR)
-    c = jax.lax.optimization_barrier(tuple(c))
-    return jax.jvp(lambda c: _quat_to_euler_parts(c, seq), (c,), (tuple(dc),))
 
 
 @public

@@ -55,7 +55,6 @@ def _scaled(v, factors):
     return v
 
 
-@jax.custom_jvp
 def _sum_outer(x, y, fx, fy):
     """`sum_n (x_n fx)(y_n fy)^T` `(..., p, r)` for `(..., N, p)` and `(..., N, r)`;
     `fx`, `fy` are tuples of constant per-batch-element factors (powers of two from
@@ -65,8 +64,7 @@ def _sum_outer(x, y, fx, fy):
     For a few vectors, a sum of broadcast outer products: one loop over the batch that reads
     the inputs once (XLA:CPU runs a batched `dot` of such small matrices several times
     slower, and scaled copies of the inputs would be written and read again); for many, an
-    `einsum`. The derivative (`_outer_tangent`) is written so that its transpose, the
-    reverse mode, is elementwise too."""
+    `einsum`. JAX differentiates this code."""
     if not _unrolled(x, y):
         return _einsum_outer(*_scaled_operands(x, y, fx, fy))
     xs, ys = _scaled_operands(*_broadcast_batch(x, y, fx, fy))
@@ -85,33 +83,6 @@ def _broadcast_batch(x, y, fx, fy):
 
 def _scaled_operands(x, y, fx, fy):
     return (_scaled(v, [f[..., None, None] for f in fs]) for v, fs in ((x, fx), (y, fy)))
-
-
-def _outer_tangent(x, y, dx, dy):
-    """`sum_n dx_n y_n^T + x_n dy_n^T` for the unrolled case, as columns `sum_n dx_n y_nj`
-    and rows `sum_n x_ni dy_n`: whole vectors of the tangents times entries of the constants
-    `x`, `y`. The transpose (reverse mode) is then, per vector, the cotangent's columns or
-    rows times entries of `x` and `y`: no reduction and no batched `dot`. Each tangent
-    vector is sliced once: JAX transposes a slice into a pad of the whole cotangent, and XLA
-    evaluates every pad of a sum at every entry."""
-    n, p, r = x.shape[-2], x.shape[-1], y.shape[-1]
-    dxs, dys = ([d[..., k, :] for k in range(n)] for d in (dx, dy))
-    cols = jnp.stack([sum(dxs[k] * y[..., k, j : j + 1] for k in range(n)) for j in range(r)], -1)
-    rows = jnp.stack([sum(x[..., k, i : i + 1] * dys[k] for k in range(n)) for i in range(p)], -2)
-    return cols + rows
-
-
-@_sum_outer.defjvp
-def _sum_outer_jvp(primals, tangents):
-    (x, y, fx, fy), (dx, dy, _, _) = primals, tangents  # the factors are constants
-    out = _sum_outer(x, y, fx, fy)
-    if not _unrolled(x, y):
-        (xs, ys), (dxs, dys) = _scaled_operands(x, y, fx, fy), _scaled_operands(dx, dy, fx, fy)
-        return out, _einsum_outer(dxs, ys) + _einsum_outer(xs, dys)
-    x, y, fx, fy = _broadcast_batch(x, y, fx, fy)
-    dx, dy = jnp.broadcast_to(dx, x.shape), jnp.broadcast_to(dy, y.shape)
-    (xs, ys), (dxs, dys) = _scaled_operands(x, y, fx, fy), _scaled_operands(dx, dy, fx, fy)
-    return out, _outer_tangent(xs, ys, dxs, dys)
 
 
 def _mT(x):

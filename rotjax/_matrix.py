@@ -20,7 +20,7 @@ from ._numerics import (
     stack,
     sum_squares,
 )
-from ._shepperd import column, entries, k4_columns, masks, select_column
+from ._shepperd import entries, k4_columns, select_column
 
 METHODS = ("shepperd", "markley", "optimal")
 
@@ -84,55 +84,21 @@ def _shepperd(R):
     return stack(shepperd_parts(tuple(entries(R))))
 
 
-@jax.custom_jvp
 def shepperd_parts(R):
     """Shepperd extraction, scalar last, `w >= 0`: the selected column of `K` over its norm.
 
     Written for XLA:CPU: every step is a per-rotation scalar expression (no reduction over a
     stacked axis); the four components are selected first and the scale `rsqrt(|c|^2)` is
     computed from them; with `rsqrt` (multiplications and additions only) XLA emits a
-    single transposing loop that reads the matrix once. JAX differentiates this code itself:
-    every operation has a finite derivative wherever it is reached (the divisor is at least
-    ``t^2``), and at a switch of the selected column it is the derivative of the branch taken.
-    The rule below is that derivative, written on per-rotation scalars (tested equal to JAX's).
+    single transposing loop that reads the matrix once. JAX differentiates this code: every
+    operation has a finite derivative wherever it is reached (the divisor is at least ``t^2``),
+    and at a switch of the selected column it is the derivative of the branch taken.
     """
     c, sq = selected_column(R)
     # The norm of the selected column (not 2 sqrt of its diagonal entry, which is cheaper but
     # gives a non-unit result for a non-orthogonal R).
     z = _hemisphere_scale(c, sq)
     return tuple(x * z for x in c)
-
-
-def column_tangent(R, dR):
-    """The selected column ``c`` of the homogeneous ``K`` (as :func:`selected_column`) and its
-    tangent ``dc``: JAX's derivative of that code, term by term. ``r = s R`` (``s`` a constant
-    power of two), ``t = h rsqrt(h)`` with ``h = |r|^2 / 3``, so ``dt = tau dh``,
-    ``tau = y (1 - h y^2 / 2)``, ``y = rsqrt(h)`` (rsqrt's rule); ``K`` is affine in ``R``
-    and the masks are constant, so ``dc`` is the selected column of ``K``'s own formula on
-    ``s dR``, with ``dt`` for ``t``. ``R`` and ``dR``: the nine entries, row by row."""
-    cols, diag, (h, y, s) = _homogeneous_k(R)
-    m = masks(diag)
-    d = list(dR)
-    r_dr = sum((x * s) * e for x, e in zip(R, d, strict=True))  # r . dR, r = s R
-    dt = (2.0 / 3.0) * y * (1.0 - 0.5 * h * y * y) * r_dr
-    dcols, _ = k4_columns(d, dt)
-    return column(m, cols), [s * x for x in column(m, dcols)]
-
-
-def _shepperd_tangent(R, dR):
-    # q = c z, z = +-rsqrt(|c|^2), so dq = u - q (q . u) with u = z dc.
-    c, dc = column_tangent(R, dR)
-    z = _hemisphere_scale(c, sum_squares(c))
-    q = [x * z for x in c]
-    u = [x * z for x in dc]
-    qu = sum(q[a] * u[a] for a in range(4))
-    return tuple(u[a] - q[a] * qu for a in range(4))
-
-
-@shepperd_parts.defjvp
-def _shepperd_parts_jvp(primals, tangents):
-    (R,), (dR,) = primals, tangents
-    return shepperd_parts(R), _shepperd_tangent(R, dR)
 
 
 def _k_times(cols, p):
@@ -211,11 +177,10 @@ def matrix_to_quaternion(
         in every 3x3 direction, on and off SO(3): a perturbation `R @ S` with `S`
         symmetric (scaling, shear) moves `"shepperd"` and `"markley"` as it moves their
         formulas. Where the selected column switches (off SO(3) the result jumps there), it
-        is the derivative of the branch taken. `"shepperd"` has a hand-written rule for
-        reverse-mode speed, equal to JAX's derivative of its code (tested). For the derivative
-        of "the rotation nearest to this matrix", which ignores such perturbations to first
-        order, use `"optimal"`: its gradient is that of the top eigenvector, finite while
-        the top eigenvalue is simple (always, for matrices near a rotation).
+        is the derivative of the branch taken. For the derivative of "the rotation nearest
+        to this matrix", which ignores such perturbations to first order, use `"optimal"`: its
+        gradient is that of the top eigenvector, finite while the top eigenvalue is simple
+        (always, for matrices near a rotation).
 
     Examples:
         ```python

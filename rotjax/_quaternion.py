@@ -8,8 +8,6 @@ conjugate) do not, because kinematics needs them on non-unit quaternions.
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 from jax import Array
@@ -76,30 +74,13 @@ def scaled_vector_part(q, scale, with_w):
     return stack(scaled_vector_parts(tuple(unstack(q)), scale, with_w))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
 def scaled_vector_parts(q, scale, with_w):
+    """:func:`scaled_vector_part` on the four components of ``q``: the three components of
+    ``k q_v``. JAX differentiates this code."""
     (x, y, z, w), _ = _prescale(q)  # NaN for the zero quaternion or a non-finite one
     n2 = x * x + y * y + z * z + (w * w if with_w else 0)
     k = scale(n2, w)
     return k * x, k * y, k * z
-
-
-@scaled_vector_parts.defjvp
-def _scaled_vector_parts_jvp(scale, with_w, primals, tangents):
-    # JAX's derivative of the code above, grouped: with the prescaled components (s a constant
-    # power of two), d(k v) = k dv + v dk, dk = 2 k_n2 (u . du) + k_w dw (u = v, or q with
-    # with_w), where k_n2 and k_w are JAX's derivatives of `scale` (forward mode, per rotation):
-    # k and its two derivatives computed once per rotation, not in each component's expression.
-    (q,), (dq,) = primals, tangents
-    (x, y, z, w), s = _prescale(q)
-    n2 = x * x + y * y + z * z + (w * w if with_w else 0)
-    ones, zeros = jnp.ones_like(n2), jnp.zeros_like(n2)
-    k, k_n2 = jax.jvp(scale, (n2, w), (ones, zeros))
-    _, k_w = jax.jvp(scale, (n2, w), (zeros, ones))
-    dx, dy, dz, dw = (e * s for e in dq)
-    dk = 2 * k_n2 * (x * dx + y * dy + z * dz + (w * dw if with_w else 0)) + k_w * dw
-    out = (k * dx + x * dk, k * dy + y * dk, k * dz + z * dk)
-    return (k * x, k * y, k * z), out
 
 
 def quat_multiply(p, q):
@@ -378,32 +359,11 @@ def _apply(q, v):
     return stack(_apply_parts(tuple(unstack(q)), tuple(unstack(v))))
 
 
-@jax.custom_jvp
 def _apply_parts(q, v):
     p, _ = _prescale(q)
     r = rsqrt(sum_squares(p))  # the unit quaternion, on per-rotation scalars
     d = quat_turn([x * r for x in p], v)
     return tuple(a + b for a, b in zip(v, d, strict=True))
-
-
-@_apply_parts.defjvp
-def _apply_parts_jvp(primals, tangents):
-    # JAX's derivative of the code above, grouped. With p the prescaled quaternion (s a
-    # constant power of two), r = 1 / |p| and T = quat_turn (T(u, v) = r^2 T(p, v) for u = r p):
-    # d out = dv + r^2 T(p, dv) + r^2 s T'(p, v)[dq] - 2 r^4 s (p . dq) T(p, v),
-    # T' the derivative in p (linear in both), T'(p, v)[p] = 2 T(p, v), and
-    # du = r s (dq - r^2 p (p . dq)): every component a per-rotation expression, r computed
-    # once (JAX's own transpose of the code above wrote the cotangent of q in four loops, each
-    # computing the whole chain again).
-    (q, v), (d, e) = primals, tangents
-    p, s = _prescale(q)
-    r2 = rsqrt(sum_squares(p)) ** 2
-    by_v = quat_turn(p, e)  # T(p, dv): linear in dv
-    by_q = jax.jvp(lambda u: quat_turn(u, v), (p,), (list(d),))[1]  # T'(p, v)[dq]
-    m = (2 * s) * (r2 * r2) * sum(x * dx for x, dx in zip(p, d, strict=True))
-    turn = quat_turn(p, v)
-    out = tuple(e[a] + r2 * by_v[a] + (r2 * s) * by_q[a] - m * turn[a] for a in range(3))
-    return _apply_parts(q, v), out
 
 
 @public

@@ -196,9 +196,9 @@ def test_check_grads_matrix_functions_on_and_off_so3(name):
     _check_grads(MATRIX_FUNCTIONS[name], (_noisy_batch(3),), order=2, modes=("fwd", "rev"))
 
 
-# Order 2 is slow: its rule's second derivatives are compared with JAX's of the forward code
-# (test_euler_hand_written_derivative_equals_autodiff_of_its_formula), the Shepperd column's
-# checked to order 2 above.
+# Order 2 is slow: matrix_to_euler's derivative is JAX's of the Shepperd column (checked to
+# order 2 above), then quaternion_to_euler's rule, whose second derivatives are compared with
+# JAX's of its code (test_euler_hand_written_derivative_equals_autodiff_of_its_formula).
 @pytest.mark.parametrize("order", sweep([1, 2], fast=[1]))
 @pytest.mark.parametrize("seq", sweep(["ZXZ", "xyz"], fast=["xyz"]))
 def test_check_grads_matrix_to_euler_on_and_off_so3(seq, order):
@@ -268,7 +268,7 @@ def test_check_grads_generic(name):
     _check_grads(f, (x,), order=1, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
 
 
-RULES = {
+OFF_SPHERE = {
     "quaternion_to_rotvec": rj.quaternion_to_rotvec,
     "quaternion_to_mrp": rj.quaternion_to_mrp,
     "quaternion_to_euler": lambda q: rj.quaternion_to_euler(q, "ZYX"),
@@ -279,16 +279,18 @@ RULES = {
 }
 
 
-# Order 2 is slow: each rule's second derivatives are compared with JAX's of the forward code
-# by the *_hand_written_derivative_equals_autodiff_of_its_formula tests.
+# Order 2 is slow: the default tier compares the rules' second derivatives with JAX's of the
+# forward code (the *_hand_written_derivative_equals_autodiff_of_its_formula tests) and checks
+# that the others' are finite (the *_derivatives_finite_* tests).
 @pytest.mark.parametrize("order", sweep([1, 2], fast=[1]))
-@pytest.mark.parametrize("name", sorted(RULES))
-def test_check_grads_of_hand_written_rules_off_the_unit_sphere(name, order):
-    """The functions with a hand-written rule, at quaternions of norm 0.3 and 4 (off the
-    unit sphere, where the rule must still be the derivative of the code) and on it: first
-    and second order, both modes (quaternion_apply in both arguments through one input)."""
+@pytest.mark.parametrize("name", sorted(OFF_SPHERE))
+def test_check_grads_off_the_unit_sphere(name, order):
+    """Quaternion conversions at quaternions of norm 0.3 and 4 (off the unit sphere, where the
+    derivative, a rule's for quaternion_to_euler and rotvec_to_quaternion, must still be that
+    of the code) and on it: first and second order, both modes (quaternion_apply in both
+    arguments through one input)."""
     q = np.concatenate([Q[:2] * 0.3, Q[2:] * 4.0, Q[:1]])
-    _check_grads(RULES[name], (q,), order=order, modes=("fwd", "rev"))
+    _check_grads(OFF_SPHERE[name], (q,), order=order, modes=("fwd", "rev"))
 
 
 @pytest.mark.parametrize("seq", SEQS, scope="module")
@@ -539,89 +541,41 @@ def test_euler_to_matrix_grads_at_lock(seq):
         _check_grads_euler("euler_to_quaternion", seq, a)
 
 
-@pytest.mark.parametrize("which", ["_shepperd"])
-def test_shepperd_hand_written_derivative_equals_autodiff_of_its_formula(which):
-    """The Shepperd rule (and its transpose) equals JAX's derivative of the forward code on
-    rotations, special matrices, noisy and scaled matrices and random ones; for both forms
-    (reciprocal root, and the division used by matrix_to_euler)."""
-    import rotjax._matrix
-
-    _shepperd = getattr(rotjax._matrix, which)
-    ref = undecorated(rotjax._matrix.shepperd_parts, matrix=(0,))
-    rng = np.random.default_rng(11)
-    base = np.stack(
-        [SPECIAL_MATRICES[k] for k in sorted(SPECIAL_MATRICES)]
-        + [np.asarray(rj.quaternion_to_matrix(q)) for q in rng.normal(size=(8, 4))]
-    )
-    R = np.concatenate([base, base + 0.1 * rng.normal(size=base.shape), rng.normal(size=(8, 3, 3))])
-    R = jnp.asarray(R * np.exp(rng.uniform(-5, 5, size=(len(R), 1, 1))))
-    dR = jnp.asarray(rng.normal(size=R.shape))
-    jit = jax.jit  # one compiled program each, not eager dispatch of every operation
-    q, jv = jit(lambda R, dR: jax.jvp(_shepperd, (R,), (dR,)))(R, dR)
-    q_ref, jv_ref = jit(lambda R, dR: jax.jvp(ref, (R,), (dR,)))(R, dR)
-    assert_close(q, q_ref, atol=1e-15)
-    scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
-    assert_close(jv / scale, jv_ref / scale, atol=1e-14)
-    w = jnp.asarray(rng.normal(size=q.shape))
-    g = jit(jax.grad(lambda m: jnp.sum(w * _shepperd(m))))(R)
-    g_ref = jit(jax.grad(lambda m: jnp.sum(w * ref(m))))(R)
-    scale = np.abs(np.asarray(g_ref)).max(axis=(-2, -1), keepdims=True)
-    assert_close(g / scale, g_ref / scale, atol=1e-14)
-
-
-def test_apply_hand_written_derivative_equals_autodiff_of_its_formula():
-    """quaternion_apply's custom jvp (its transpose, and second derivatives) equals JAX's own
-    derivative of the forward code: quaternions of norms 1e-20 to 1e20, 180 degrees, the
-    identity, one quaternion broadcast against many vectors, both dtypes; NaN where q is zero
-    or not finite, as JAX's."""
-    from rotjax._quaternion import _apply, _apply_parts
-
-    ref = undecorated(_apply_parts)
-
+def test_apply_derivatives_finite_at_any_scale():
+    """quaternion_apply's derivatives (JAX's of its code) keep the dtype and are finite, first
+    and second: quaternions of norms 1e-20 to 1e20, 180 degrees, the identity, one quaternion
+    broadcast against many vectors, both dtypes; NaN where q is zero or not finite."""
+    apply = rj.quaternion_apply
     rng = np.random.default_rng(31)
     special = [[0, 0, 0, 1.0], [1.0, 0, 0, 0], [0, 0.6, 0.8, 0], [1e-9, 0, 0, -1]]
     q = np.concatenate([special, rng.normal(size=(28, 4))])
     q = q * np.exp(rng.uniform(-46, 46, size=(len(q), 1)))
     v = rng.normal(size=(len(q), 3))
-    jit = jax.jit
-
-    def rel(a, b):  # error relative to the largest component of the reference, per row
-        return np.abs(np.asarray(a - b)) / (1e-300 + np.abs(np.asarray(b)).max(-1, keepdims=True))
-
-    for dtype, tol in ((jnp.float64, 1e-14), (jnp.float32, 3e-6)):
+    jit = jax.jit  # one compiled program each, not eager dispatch of every operation
+    grad = jit(jax.grad(lambda a, b, c: jnp.sum(c * apply(a, b)), (0, 1)))
+    for dtype in (jnp.float64, jnp.float32):
         qd, vd = jnp.asarray(q, dtype), jnp.asarray(v, dtype)
         dq = jnp.asarray(
             rng.normal(size=q.shape) / np.linalg.norm(q, axis=-1, keepdims=True), dtype
         )
         dv = jnp.asarray(rng.normal(size=v.shape), dtype)
-        out, jv = jit(lambda a, b, s, t: jax.jvp(_apply, (a, b), (s, t)))(qd, vd, dq, dv)
-        out_ref, jv_ref = jit(lambda a, b, s, t: jax.jvp(ref, (a, b), (s, t)))(qd, vd, dq, dv)
-        np.testing.assert_array_equal(out, out_ref)
-        assert jv.dtype == dtype and rel(jv, jv_ref).max() < tol
+        out, jv = jit(lambda a, b, s, t: jax.jvp(apply, (a, b), (s, t)))(qd, vd, dq, dv)
+        assert jv.dtype == dtype and np.all(np.isfinite(np.asarray(jv)))
         ct = jnp.asarray(rng.normal(size=out.shape), dtype)
-        grad, grad_ref = (
-            jit(jax.grad(lambda a, b, c, fn=fn: jnp.sum(c * fn(a, b)), (0, 1)))
-            for fn in (_apply, ref)
-        )
         for qq in (qd, qd[:1]):  # one quaternion broadcast against every vector
-            g, g_ref = grad(qq, vd, ct), grad_ref(qq, vd, ct)
-            for x, x_ref in zip(g, g_ref, strict=True):
-                assert x.shape == x_ref.shape and np.all(np.isfinite(np.asarray(x)))
-                assert rel(x, x_ref).max() < tol * (10 if qq.shape[0] == 1 else 1)
-        # no rotation (zero or not finite q, in the first rows): NaN derivative, as JAX's
+            g = grad(qq, vd, ct)
+            for x, arg in zip(g, (qq, vd), strict=True):
+                assert x.shape == arg.shape and x.dtype == dtype
+                assert np.all(np.isfinite(np.asarray(x)))
+        # no rotation (zero or not finite q, in the first rows): NaN derivative
         bad = jnp.asarray([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]], dtype)
         qb, ones = qd.at[:3].set(bad), jnp.ones_like(vd)
-        g, g_ref = grad(qb, ones, jnp.ones_like(ct))[0], grad_ref(qb, ones, jnp.ones_like(ct))[0]
-        np.testing.assert_array_equal(np.isnan(g), np.isnan(g_ref))
+        g = grad(qb, ones, jnp.ones_like(ct))[0]
         assert np.all(np.isnan(g[:3])) and not np.any(np.isnan(g[3:]))
-    hess, hess_ref = (jit(jax.hessian(fn, (0, 1))) for fn in (_apply, ref))
-    for i in (0, 1, 5):
-        h, h_ref = (
-            hess(jnp.asarray(q[i]), jnp.asarray(v[i])),
-            hess_ref(jnp.asarray(q[i]), jnp.asarray(v[i])),
-        )
-        for x, x_ref in zip(jax.tree.leaves(h), jax.tree.leaves(h_ref), strict=True):
-            assert_close(x, x_ref, atol=1e-13 * (1 + float(jnp.abs(x_ref).max())))
+    hess = jit(jax.hessian(apply, (0, 1)))
+    for i in (0, 1, 5):  # the identity, 180 degrees, generic
+        h = hess(jnp.asarray(q[i]), jnp.asarray(v[i]))
+        assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(h))
 
 
 def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
@@ -664,24 +618,12 @@ def _vmap_grad(f, u):
 
 
 @pytest.mark.parametrize("which", ["rotvec", "mrp"])
-def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
-    """The custom jvp of quaternion_to_rotvec and quaternion_to_mrp (one rule, for `k q_v`;
-    and its transpose, and second derivatives) equals JAX's own derivative of the forward
-    code, and the rule of the rotvec's polynomial that of JAX on the polynomial: quaternions
-    of norms 1e-20 to 1e20, identity and near it, 180 degrees, both signs of w, and n = |w|
-    (the switch between the two atan forms)."""
-    from rotjax._elementary import atan_ratio as _atan_ratio
-    from rotjax._mrp import _mrp_scale
-    from rotjax._quaternion import scaled_vector_part, scaled_vector_parts
-    from rotjax._rotvec import rotvec_scale
-
-    k_of, with_w = {"rotvec": (rotvec_scale, False), "mrp": (_mrp_scale, True)}[which]
-
-    def quat_to_rotvec(q):
-        return scaled_vector_part(q, k_of, with_w)
-
-    quat_to_rotvec.fun = undecorated(scaled_vector_parts, k_of, with_w)
-
+def test_rotvec_derivatives_finite_at_any_scale(which):
+    """quaternion_to_rotvec's and quaternion_to_mrp's derivatives (JAX's of their code) are
+    finite, first and second: quaternions of norms 1e-20 to 1e20, identity and near it,
+    180 degrees, both signs of w, and n = |w| (the switch between the two atan forms); NaN
+    where q is zero or not finite."""
+    f = {"rotvec": rj.quaternion_to_rotvec, "mrp": rj.quaternion_to_mrp}[which]
     rng = np.random.default_rng(23)
     special = [
         [0, 0, 0, 1.0], [0, 0, 0, -2.0], [1e-9, -2e-9, 0, 1], [1.0, 0, 0, 0], [0, 3, 4, 0],
@@ -691,41 +633,37 @@ def test_rotvec_hand_written_derivative_equals_autodiff_of_its_formula(which):
     q = jnp.asarray(q * np.exp(rng.uniform(-46, 46, size=(len(q), 1))))
     dq = jnp.asarray(rng.normal(size=q.shape)) * jnp.linalg.norm(q, axis=-1, keepdims=True)
     jit = jax.jit
-    out, jv = jit(lambda x, t: jax.jvp(quat_to_rotvec, (x,), (t,)))(q, dq)
-    out_ref, jv_ref = jit(lambda x, t: jax.jvp(quat_to_rotvec.fun, (x,), (t,)))(q, dq)
-    np.testing.assert_array_equal(out, out_ref)
-    scale = 1 + np.abs(np.asarray(jv_ref)).max(axis=-1, keepdims=True)
-    assert_close(jv / scale, jv_ref / scale, atol=1e-14)
+    out, jv = jit(lambda x, t: jax.jvp(f, (x,), (t,)))(q, dq)
+    assert np.all(np.isfinite(np.asarray(jv)))
     ct = jnp.asarray(rng.normal(size=out.shape))
-    grad, grad_ref = (
-        jit(jax.grad(lambda x, c, fn=fn: jnp.sum(c * fn(x))))
-        for fn in (quat_to_rotvec, quat_to_rotvec.fun)
-    )
-    g, g_ref = grad(q, ct), grad_ref(q, ct)
-    assert np.all(np.isfinite(np.asarray(g)))
-    scale = np.abs(np.asarray(g_ref)).max(axis=-1, keepdims=True)
-    assert_close(g / scale, g_ref / scale, atol=1e-14)
-    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (quat_to_rotvec, quat_to_rotvec.fun))
+    grad = jit(jax.grad(lambda x, c: jnp.sum(c * f(x))))
+    assert np.all(np.isfinite(np.asarray(grad(q, ct))))
+    hess = jit(jax.hessian(f))
     for x in (q[-1] / jnp.linalg.norm(q[-1]), q[2], q[3]):  # generic, near identity, 180 degrees
-        h, h_ref = hess(x), hess_ref(x)
-        assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
+        assert np.all(np.isfinite(np.asarray(hess(x))))
+    # no rotation (zero or not finite q, in the first rows): NaN derivative
+    qb = q.at[:3].set(jnp.array([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]]))
+    g = grad(qb, jnp.ones_like(ct))
+    assert np.all(np.isnan(g[:3])) and not np.any(np.isnan(g[3:]))
+
+
+def test_atan_ratio_rule_equals_autodiff_of_its_formula():
+    """The rotation vector's polynomial atan(sqrt(u)) / sqrt(u): its rule equals JAX's
+    derivative of its code on [0, 1], in both dtypes."""
+    from rotjax._elementary import atan_ratio
+
     u = jnp.linspace(0.0, 1.0, 257)
     for dtype, tol in ((jnp.float64, 1e-15), (jnp.float32, 1e-6)):
-        d = _vmap_grad(_atan_ratio, u.astype(dtype))
-        d_ref = _vmap_grad(_atan_ratio.fun, u.astype(dtype))
+        d = _vmap_grad(atan_ratio, u.astype(dtype))
+        d_ref = _vmap_grad(atan_ratio.fun, u.astype(dtype))
         assert d.dtype == dtype
         assert_close(d, d_ref, atol=tol)
-    # no rotation (zero or not finite q, in the first rows): NaN derivative, as JAX's
-    qb = q.at[:3].set(jnp.array([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]]))
-    g, g_ref = grad(qb, jnp.ones_like(ct)), grad_ref(qb, jnp.ones_like(ct))
-    np.testing.assert_array_equal(np.isnan(g), np.isnan(g_ref))
-    assert np.all(np.isnan(g[:3])) and not np.any(np.isnan(g[3:]))
 
 
 @pytest.mark.parametrize("method", ["shepperd", "markley", "optimal"])
 def test_matrix_to_quaternion_float32_derivatives_stay_float32(method):
-    """The hand-written derivatives keep the input dtype, in both modes (a float64 constant
-    inside a rule would otherwise promote the tangent and JAX would reject it)."""
+    """The derivatives keep the input dtype, in both modes (a float64 constant inside a rule
+    or the code would otherwise promote the tangent and JAX would reject it)."""
     R = jnp.asarray(rj.quaternion_to_matrix(np.array([0.3, -0.5, 0.2, 0.78])), dtype=jnp.float32)
     f = lambda m: rj.matrix_to_quaternion(m, method=method)  # noqa: E731
     ones = jnp.ones(4, jnp.float32)
@@ -775,22 +713,19 @@ def _assert_rule_equals_autodiff(rule, ref, x, dx, ct, min_same=None):
 
 
 @pytest.mark.parametrize("seq", SEQS, scope="module")
-def test_matrix_to_euler_rule_equals_autodiff_of_its_formula(seq):
-    """matrix_to_euler's custom jvp (the Shepperd column's derivative, then quaternion_to_euler's
-    rule) and its transpose equal JAX's own derivative of the forward code: the matrices of
-    quaternions of any norm, near and exactly at lock and at 180 degrees, scaled by 1e-20 to
-    1e20, with noise, and random matrices."""
-    from rotjax._euler import _matrix_to_euler_parts
-
+def test_matrix_to_euler_derivatives_finite_at_any_scale(seq):
+    """matrix_to_euler's derivatives (JAX's of the Shepperd column, then quaternion_to_euler's
+    rule), both modes, are finite: the matrices of quaternions of any norm, near and exactly at
+    lock and at 180 degrees, scaled by 1e-20 to 1e20, with noise, and random matrices; the
+    shared program's angles are the forward's."""
     rng = np.random.default_rng(23)
     R = np.asarray(rj.quaternion_to_matrix(_euler_test_quaternions(seq)))
     R = np.concatenate([R, R + 1e-3 * rng.normal(size=R.shape), rng.normal(size=(6, 3, 3))])
     R = R * np.exp(rng.uniform(-46, 46, size=(len(R), 1, 1)))
     dR = rng.normal(size=R.shape) * np.abs(R).max(axis=(-2, -1), keepdims=True)
     ct = rng.normal(size=(len(R), 3))
-    rule = _euler("matrix_to_euler", seq, R, dR, ct)
-    ref = undecorated(_matrix_to_euler_parts, seq, matrix=(0,))
-    out = _assert_rule_equals_autodiff(rule, ref, R, dR, ct, min_same=0.85)
+    out, jv, gr = _euler("matrix_to_euler", seq, R, dR, ct)
+    assert np.all(np.isfinite(jv)) and np.all(np.isfinite(gr))
     assert_close(angle_diff(out, rj.matrix_to_euler(R, seq)), 0, atol=1e-15)  # the forward's
 
 
