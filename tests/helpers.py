@@ -124,6 +124,30 @@ def undecorated(kernel, *static, matrix=()):
     return fun
 
 
+def jacobian_rows(f, x, *rows):
+    """``jax.vmap(jax.jacfwd(f))(x, *rows)`` (the Jacobian in ``x`` only) for a batch-native
+    ``f``, whose rows (the first axis of ``x`` and of each of ``rows``) are independent: one
+    jitted jvp of ``f`` at the rows repeated once per component of a row of ``x``, with the
+    basis directions as tangents; the inputs are built with NumPy, outside the program. The same
+    numbers, several times faster to compile: a vmapped ``jacfwd`` broadcasts every row's values
+    against the directions, and XLA:CPU's code for that spends seconds in LLVM's inliner.
+    ``f`` may return a pytree; each leaf comes back as ``(n, *out, *row_shape)``."""
+    x = np.asarray(x)
+    n, inner = x.shape[0], x.shape[1:]
+    d = int(np.prod(inner))
+    basis = np.eye(d, dtype=x.dtype).reshape(d, *inner)
+    reps = [np.repeat(np.asarray(r), d, axis=0) for r in (x, *rows)]
+    e = np.tile(basis, (n,) + (1,) * len(inner))
+    t = jax.jit(lambda e, a, *r: jax.jvp(lambda y: f(y, *r), (a,), (e,))[1])(e, *reps)
+
+    def shape(y):
+        y = np.asarray(y)
+        out = y.shape[1:]
+        return np.moveaxis(y.reshape(n, d, *out), 1, -1).reshape(n, *out, *inner)
+
+    return jax.tree_util.tree_map(shape, t)
+
+
 def check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps=None):
     """``jax.test_util.check_grads`` with each program jitted: the same checks (the same random
     directions, finite differences, tolerances and assertions, by JAX's ``check_jvp`` and
