@@ -6,7 +6,9 @@ evaluate such a value inside each consumer that reads it more than once; it writ
 a loop of its own, which reads the input again. These forms fuse into the one loop of a
 conversion, alone and composed. Each states its contract (the largest error against mpmath, in
 ulp or eps of the dtype, over its domain; its derivative), which tests/test_numerics.py and the
-accuracy tests check. On backends other than the CPU they cost the same few operations.
+accuracy tests check. The forms pay on XLA:CPU; on other backends ``rsqrt``, ``sin_cos`` and
+``atan2`` are XLA's own operations (``jax.lax.platform_dependent``), with the same derivative
+rules. ``atan_ratio`` has no XLA counterpart and is the polynomial everywhere.
 """
 
 from __future__ import annotations
@@ -40,6 +42,10 @@ def rsqrt(x):
     (checked against mpmath in the tests). Outside the domain (zero, subnormal, infinite) the
     result is meaningless; NaN gives NaN.
     """
+    return jax.lax.platform_dependent(x, cpu=_rsqrt_newton, default=jax.lax.rsqrt)
+
+
+def _rsqrt_newton(x):
     int_type, magic, steps = _RSQRT_START[jnp.dtype(x.dtype)]
     bits = jax.lax.bitcast_convert_type(x, int_type)
     # Unsigned, so that the shift is a logical one: x86 has no vector arithmetic shift of
@@ -99,6 +105,14 @@ def sin_cos(a):
     polynomials above on the rest, and the quadrant `j mod 4` chosen by `jnp.where`. XLA fuses
     this into the loop of its consumers (it keeps `jnp.sin` and `jnp.cos`, expensive, in
     loops of their own when their result is read more than once)."""
+    return jax.lax.platform_dependent(a, cpu=_sin_cos_poly, default=_sin_cos_xla)
+
+
+def _sin_cos_xla(a):
+    return jnp.sin(a), jnp.cos(a)
+
+
+def _sin_cos_poly(a):
     size = jnp.dtype(a.dtype).itemsize
     j = jnp.round(a * (2 / np.pi))
     p1, p2, p3 = _PIO2[size]
@@ -197,6 +211,14 @@ def atan2(y, x):
     Signed zeros follow IEEE `atan2` except at the origin, which gives 0 with a zero
     derivative (the minimum-norm subgradient: the function has no limit there).
     """
+    return jax.lax.platform_dependent(y, x, cpu=_atan2_poly, default=_atan2_xla)
+
+
+def _atan2_xla(y, x):
+    return jnp.where((x == 0) & (y == 0), jnp.zeros_like(x), jnp.arctan2(y, x))
+
+
+def _atan2_poly(y, x):
     size = jnp.dtype(x.dtype).itemsize
     ax, ay = jnp.abs(x), jnp.abs(y)
     swap = ay > ax

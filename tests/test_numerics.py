@@ -9,6 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+import rotjax as rj
 from rotjax._elementary import rsqrt
 from rotjax._matrix import selected_column
 from rotjax._numerics import exponent_scale
@@ -78,3 +79,19 @@ def test_exponent_scale_is_exact_and_clamped(dtype):
     s, inv = (np.asarray(v) for v in exponent_scale(odd))
     assert np.all(np.isfinite(s) & (s > 0) & np.isfinite(inv) & (inv > 0))
     assert np.isinf(np.asarray(odd)[2] * s[2])
+
+
+def test_other_backends_use_xla_operations():
+    """Lowered for a GPU (no GPU needed to lower), ``rsqrt``, ``sin_cos`` and ``atan2`` are
+    XLA's own operations; lowered for the CPU, the polynomial forms (no such operation)."""
+    from jax import export
+
+    def f(q, v):
+        return rj.quaternion_to_euler(q, "ZYX"), rj.rotvec_to_quaternion(v)
+
+    args = (jax.ShapeDtypeStruct((8, 4), jnp.float32), jax.ShapeDtypeStruct((8, 3), jnp.float32))
+    ops = ("rsqrt", "atan2", "sine", "cosine")
+    for platform, present in (("cuda", True), ("cpu", False)):
+        text = export.export(jax.jit(f), platforms=[platform])(*args).mlir_module()
+        for op in ops:
+            assert (f"stablehlo.{op}" in text) == present, (platform, op)
