@@ -736,14 +736,7 @@ class RigidTransform(BatchedPytree):
             # [ 0.   0.   0.5  1.  -0.   0. ]
             ```
         """
-        if modulus is not None:
-            raise NotImplementedError("modulus not supported")
-        e = jnp.asarray(n)
-        if e.shape == (1,):
-            e = e[0]
-        if e.ndim != 0:
-            raise ValueError("Array exponent must be a scalar")
-        e = jnp.broadcast_to(e.astype(self._stored.dtype), self.shape)
+        e = self._exponent(n, modulus)
         return RigidTransform._raw(*_pow(self._quat, self._translation, e))
 
     def inv(self) -> RigidTransform:

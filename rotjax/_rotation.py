@@ -179,6 +179,18 @@ class BatchedPytree:
         """The unit quaternion of the rotation, scalar last."""
         return quaternion_normalize(self._stored)
 
+    def _exponent(self, n, modulus):
+        """scipy's ``__pow__`` exponent: a scalar (or one-element array), broadcast to the
+        batch shape in the stored dtype."""
+        if modulus is not None:
+            raise NotImplementedError("modulus not supported")
+        e = jnp.asarray(n)
+        if e.shape == (1,):
+            e = e[0]
+        if e.ndim != 0:
+            raise ValueError("Array exponent must be a scalar")
+        return jnp.broadcast_to(e.astype(self._stored.dtype), self.shape)
+
     # --- pytree and pickling ---------------------------------------------------------------
 
     def tree_flatten(self):
@@ -1037,14 +1049,7 @@ class Rotation(BatchedPytree):
             # [45.  0.  0.]
             ```
         """
-        if modulus is not None:
-            raise NotImplementedError("modulus not supported")
-        e = jnp.asarray(n)
-        if e.shape == (1,):
-            e = e[0]
-        if e.ndim != 0:
-            raise ValueError("Array exponent must be a scalar")
-        e = jnp.broadcast_to(e.astype(self._stored.dtype), self.shape)
+        e = self._exponent(n, modulus)
         return Rotation._raw(quaternion_power(self._quat, e))
 
     def inv(self) -> Rotation:
