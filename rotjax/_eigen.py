@@ -29,7 +29,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-from ._elementary import rsqrt
+from ._elementary import rsqrt, rsqrt_shared
 from ._numerics import TIE_ULPS, eps, exponent_scale, max_abs, safe_div, select
 from ._quaternion import quat_multiply, quat_to_matrix
 from ._shepperd import k4_columns, masks_once, select_column
@@ -115,7 +115,7 @@ def _rotation(app, aqq, apq):
     Each choice is made inside the one quotient `t`, and `c` and `s` come from it: XLA
     recomputes cheap expressions in every loop that uses them, and a sign of `d` taken twice
     at `d ~ 0` (an exact rotation) could differ between the loops that update the two columns.
-    `c = rsqrt(1 + t^2)` (`_elementary.rsqrt`: `1 + t^2` is in `[1, 1 + eps^-4]`)."""
+    `c = rsqrt_shared(1 + t^2)`: every later rotation reads it."""
     d = aqq - app
     r = jnp.sqrt(d * d + 4.0 * apq * apq)
     keep = d < 0
@@ -126,7 +126,7 @@ def _rotation(app, aqq, apq):
     swap = select(num == 0, 0.0, -big, num.dtype)
     t = jnp.where(zero, swap, num) / jnp.where(zero, 1.0, den)
     t = jnp.clip(t, -big, big)  # a_pq tiny but not 0: t^2 must not overflow (c = s = 0)
-    c = rsqrt(1.0 + t * t)
+    c = rsqrt_shared(1.0 + t * t)
     return c, t * c
 
 
@@ -143,7 +143,7 @@ def _unit_or(w, fallback):
     reciprocal could overflow (NaN there for `fallback=None`)."""
     n = _dot3(w, w)
     ok = n >= jnp.finfo(n.dtype).tiny  # NaN is not
-    inv = rsqrt(jnp.where(ok, n, 1.0))
+    inv = rsqrt_shared(jnp.where(ok, n, 1.0))
     if fallback is None:
         fallback = [jnp.full_like(n, jnp.nan)] * 3
     return [jnp.where(ok, x * inv, f) for x, f in zip(w, fallback, strict=True)]
@@ -161,7 +161,7 @@ def _perpendicular(u):
         jnp.where(k0, u[2], jnp.where(k1, zero, -u[0])),
         jnp.where(k0, -u[1], jnp.where(k1, u[0], zero)),
     ]
-    inv = rsqrt(_dot3(p, p))
+    inv = rsqrt_shared(_dot3(p, p))
     return [x * inv for x in p]
 
 

@@ -45,6 +45,16 @@ def rsqrt(x):
     return jax.lax.platform_dependent(x, cpu=_rsqrt_newton, default=jax.lax.rsqrt)
 
 
+def rsqrt_shared(x):
+    """`1 / sqrt(x)` as XLA's own `sqrt(1 / x)` (two roundings: within 1 ulp; JAX's derivative),
+    for a value that many later operations read: XLA counts it expensive and computes it once,
+    in a loop of its own, whereas it copies the cheap `rsqrt` above into every reader. In the
+    eigen kernel's Jacobi sweeps each rotation's `c` feeds every later rotation, and the copies
+    made `matrix_to_quaternion(method="optimal")` five times slower. (`lax.rsqrt` compiles to a
+    slower loop on XLA:CPU.)"""
+    return jnp.sqrt(1 / x)
+
+
 def _rsqrt_newton(x):
     int_type, magic, steps = _RSQRT_START[jnp.dtype(x.dtype)]
     bits = jax.lax.bitcast_convert_type(x, int_type)
