@@ -127,9 +127,10 @@ def quat_to_matrix(q):
 
 def quat_to_matrix_parts(x, y, z, w):
     """Rotation matrix of a quaternion given by its components (per-rotation arrays): the
-    entries of :func:`_matrix_entries`, stacked."""
+    entries of :func:`_matrix_entries`, stacked row by row (short expressions of the
+    quaternion: see :func:`rotjax._numerics.stack_matrix`)."""
     e = _matrix_entries(x, y, z, w)
-    return stack_matrix([e[0:3], e[3:6], e[6:9]])
+    return stack_matrix([e[0:3], e[3:6], e[6:9]], concat=True)
 
 
 @jax.custom_jvp
