@@ -61,6 +61,17 @@ def _prescale(parts):
     return [x * s for x in parts], s
 
 
+def quat_rescaled(q):
+    """``q`` times the exact power of two that brings its largest ``|component|`` into
+    ``[1, 2)``: for a product whose result is stored, not read (a composition), so that a
+    chain of them neither overflows nor underflows. Unlike :func:`quat_prescaled` there is
+    no NaN marking: a zero or non-finite ``q`` gives a zero or non-finite product, for which
+    every reader (each prescales) gives NaN."""
+    parts = unstack(q)
+    s, _ = exponent_scale(jax.lax.stop_gradient(max_abs(*parts)))
+    return stack([x * s for x in parts])
+
+
 def quat_prescaled(q):
     """:func:`_prescaled_parts` stacked: ``q`` scaled, NaN where it is not a rotation. A
     function of the rotation gives the same result for ``q`` and for this."""

@@ -34,6 +34,8 @@ from ._numerics import (
 from ._quaternion import (
     quat_conjugate,
     quat_multiply,
+    quat_normalize,
+    quat_rescaled,
     quat_to_matrix,
     quat_turn,
 )
@@ -100,8 +102,11 @@ def _as_matrix(q, t):
 
 @jit
 def _pose_compose(q1, t1, q2, t2):
+    # Stored quaternions of any norm: q1 is normalised once, for the product and the rotated
+    # translation; q2 only rescaled (as Rotation composes), so the product is of order 1.
     q1, t1, q2, t2 = broadcast_batch(q1, t1, q2, t2)
-    return quat_multiply(q1, q2), t1 + _rotate(q1, t2)
+    u1 = quat_normalize(q1)
+    return quat_multiply(u1, quat_rescaled(q2)), t1 + _rotate(u1, t2)
 
 
 @jit
@@ -675,7 +680,9 @@ class RigidTransform(BatchedPytree):
                 f"Cannot broadcast {self.shape} transforms in first to {other.shape} "
                 "transforms in second object."
             ) from None
-        q1, t1, q2, t2 = _common(self._quat, self._translation, other._quat, other._translation)
+        q1, t1, q2, t2 = _common(
+            self._stored, self._translation, other._stored, other._translation
+        )
         return RigidTransform._raw(*_pose_compose(q1, t1, q2, t2))
 
     def __mul__(self, other: RigidTransform | Rotation) -> RigidTransform:

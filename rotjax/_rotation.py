@@ -33,7 +33,7 @@ from ._numerics import broadcast_batch, check_array, check_static, cross, jit, t
 from ._quaternion import (
     angle_between,
     quat_multiply,
-    quat_prescaled,
+    quat_rescaled,
     quaternion_apply,
     quaternion_conjugate,
     quaternion_multiply,
@@ -97,10 +97,10 @@ def _scalar_last(q, scalar_first):
 @jit
 def _rotation_compose(p, q):
     # The stored quaternions need not be unit, nor is their product: the product of the
-    # prescaled ones (exact powers of two) has a norm of order 1, which no reader depends on
+    # rescaled ones (exact powers of two) has a norm in [1, 16), which no reader depends on
     # (each normalises, or is homogeneous), so it is stored as it is.
     p, q = broadcast_batch(p, q, trailing=(1, 1))
-    return quat_multiply(quat_prescaled(p), quat_prescaled(q))
+    return quat_multiply(quat_rescaled(p), quat_rescaled(q))
 
 
 @jit(static_argnames="inverse")

@@ -400,12 +400,12 @@ def test_jit_class_compiles_to_the_functions_program():
 
     q, v = jnp.asarray(Q), jnp.asarray(V)
     cls = jax.jit(lambda q, v: (Rotation.from_quat(q) * Rotation.from_quat(q[::-1])).apply(v))
-    # A product of the stored quaternions (any norm, prescaled by powers of two), stored as is.
-    from rotjax._quaternion import quat_multiply, quat_prescaled
+    # A product of the stored quaternions (any norm, rescaled by powers of two), stored as is.
+    from rotjax._quaternion import quat_multiply, quat_rescaled
 
     fun = jax.jit(
         lambda q, v: rotjax.quaternion_apply(
-            quat_multiply(quat_prescaled(q), quat_prescaled(q[::-1])), v
+            quat_multiply(quat_rescaled(q), quat_rescaled(q[::-1])), v
         )
     )
     assert ops(cls, q, v) == ops(fun, q, v)
