@@ -109,9 +109,11 @@ def _hypot(u, v):
     that reduction into separate loops.
     """
     u, v, _, inv = scaled_pair(u, v)
-    sq = u * u + v * v
+    sq = u * u + v * v  # in [1, 8) unless 0: rsqrt's domain
     zero = sq == 0
-    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq))) * inv
+    # sq rsqrt(sq), not jnp.sqrt: XLA computes a root read by several slots of a stacked
+    # result in a loop of its own, which reads the input again; this form fuses.
+    return jnp.where(zero, 0.0, sq * rsqrt(jnp.where(zero, 1.0, sq))) * inv
 
 
 @functools.cache
@@ -202,20 +204,24 @@ def _substitute(abcd, locks):
 
 def quat_to_euler(q, seq):
     """Euler angles (output order) of a scalar-last quaternion of any non-zero norm."""
-    # The angles stacked on the last axis: XLA:CPU writes them in vectorised loops (a stack on
-    # a leading axis gave one narrow loop here; after the Shepperd column, in matrix_to_euler,
-    # it gives one full-width loop).
-    angles = _quat_to_euler_parts(tuple(unstack(q)), seq)
-    if recorded(q):  # after the operation that computed q (as matrix_to_euler's, one loop)
-        return stack(angles, branches=True)
-    return jnp.stack(angles, axis=-1)
+    # q read from memory: three atan2 and a stack on the last axis, one vectorised loop (the
+    # per-slot form below leaves q's scale in a loop of its own). q computed in this trace
+    # (stacked by the operation before): the per-slot form, one loop with that operation.
+    return _quat_to_euler_stacked(tuple(unstack(q)), seq, recorded(q))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
-def _quat_to_euler_parts(q, seq):
+def _slots(x, values):
+    """``(1, ..., 1, 3)`` constants (one per output angle), of ``x``'s rank and dtype."""
+    return jnp.asarray(values, x.dtype).reshape((1,) * (x.ndim - 1) + (3,))
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
+def _quat_to_euler_stacked(q, seq, per_slot=True):
     """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold,
     on the four components of ``q`` (scalar last, any non-zero norm: every step is a ratio
-    inside atan2); the three angles in output order.
+    inside atan2); the ``(..., 3)`` angles in output order. ``per_slot``: one atan2 per output
+    element, of arguments selected for its slot (for a ``q`` computed in the same loop), else
+    three atan2 per rotation, stacked.
     """
     _, (a, b, c, d), _, locks, bad = _factors(*q, seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
@@ -229,12 +235,23 @@ def _quat_to_euler_parts(q, seq):
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
-    locked = locks[0] | locks[1]
+    # Each angle is one atan2 of its own arguments: the arguments are stacked (a select, which
+    # XLA:CPU computes in one vectorised loop with the per-rotation factors shared) and atan2
+    # runs once per output element; three atan2 stacked on a leading axis and moved last were a
+    # narrow loop, up to six times slower after a conversion that computes q.
     # The substitution makes the zeroed (last) angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: it is set exactly.
-    out = [atan2(num[n], den[n]) * f + s for n, f, s in zip(order, factor, shift, strict=True)]
-    out[2] = jnp.where(locked, 0.0, out[2])
-    return tuple(jnp.where(bad, jnp.nan, x) for x in out)
+    locked = locks[0] | locks[1]
+    if per_slot:
+        num, den = stack([num[n] for n in order]), stack([den[n] for n in order])
+        out = atan2(num, den) * _slots(num, factor) + _slots(num, shift)
+        last = _slots(num, (0, 0, 1)) == 1
+        out = jnp.where(last & locked[..., None], 0.0, out)
+    else:
+        out = [atan2(num[n], den[n]) * f + s for n, f, s in zip(order, factor, shift, strict=True)]
+        out[2] = jnp.where(locked, 0.0, out[2])
+        out = jnp.stack(out, axis=-1)
+    return jnp.where(bad[..., None], jnp.nan, out)
 
 
 @functools.cache
@@ -301,26 +318,21 @@ def _euler_jacobian(comps, seq):
     return jac
 
 
-@_quat_to_euler_parts.defjvp
-def _quat_to_euler_parts_jvp(seq, primals, tangents):
+@_quat_to_euler_stacked.defjvp
+def _quat_to_euler_stacked_jvp(seq, per_slot, primals, tangents):
     # The exact derivative of the code above (see _euler_jacobian).
     (q,), (dq,) = primals, tangents
     jac = _euler_jacobian(q, seq)
-    out = tuple(sum(j * x for j, x in zip(row, dq, strict=True)) for row in jac)
-    return _quat_to_euler_parts(q, seq), out
+    out = jnp.stack([sum(j * x for j, x in zip(row, dq, strict=True)) for row in jac], axis=-1)
+    return _quat_to_euler_stacked(q, seq, per_slot), out
 
 
 def _matrix_to_euler(R, seq):
-    """quaternion_to_euler of the Shepperd column of ``R``."""
-    return stack(_matrix_to_euler_parts(tuple(entries(R)), seq), branches=True)
-
-
-def _matrix_to_euler_parts(R, seq):
-    """quaternion_to_euler's extraction of the Shepperd column: the angles do not depend on the
-    quaternion's norm or sign, so the column needs no normalisation (NaN for a non-rotation,
-    through its diagonal)."""
-    c, _ = selected_column(R)
-    return _quat_to_euler_parts(tuple(c), seq)
+    """quaternion_to_euler's extraction of the Shepperd column of ``R``: the angles do not
+    depend on the quaternion's norm or sign, so the column needs no normalisation (NaN for a
+    non-rotation, through its diagonal)."""
+    c, _ = selected_column(tuple(entries(R)))
+    return _quat_to_euler_stacked(tuple(c), seq)
 
 
 @public

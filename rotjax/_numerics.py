@@ -203,7 +203,7 @@ def _read_jvp(primals, tangents):
     return _read(x), tuple(_components(dx))
 
 
-def stack(parts, branches=False):
+def stack(parts):
     """``(..., k)`` from ``k`` per-rotation arrays: the one way rotjax writes a stacked array
     (see :func:`unstack`).
 
@@ -211,13 +211,10 @@ def stack(parts, branches=False):
     computes every part, so XLA:CPU's loop computes the shared per-rotation factors once and is
     vectorised (a concatenate computes each part in a branch of its own, which LLVM neither
     merges nor vectorises), and no transpose is left for the layout pass to turn into a copy
-    when the result is one of several outputs. ``branches``: a concatenate on a leading axis,
-    moved last, for parts that hold a root, a division or a transcendental function, which XLA
-    does not evaluate for every slot (it writes each such part in a loop of its own)."""
-    if branches:
-        out = jnp.moveaxis(jnp.stack(parts, axis=0), 0, -1)
-        _note(out, parts)
-        return out
+    when the result is one of several outputs. A root, a division or a transcendental function
+    read by several slots is computed in a loop of its own: stack its arguments instead and
+    apply it to the stacked array (as quaternion_to_euler's atan2), or use the fusible forms of
+    ``_elementary``."""
     shape = jnp.broadcast_shapes(*(jnp.shape(p) for p in parts))
     out = _select_stack(tuple(jnp.broadcast_to(p, shape) for p in parts))
     _note(out, parts)

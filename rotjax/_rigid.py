@@ -680,9 +680,7 @@ class RigidTransform(BatchedPytree):
                 f"Cannot broadcast {self.shape} transforms in first to {other.shape} "
                 "transforms in second object."
             ) from None
-        q1, t1, q2, t2 = _common(
-            self._stored, self._translation, other._stored, other._translation
-        )
+        q1, t1, q2, t2 = _common(self._stored, self._translation, other._stored, other._translation)
         return RigidTransform._raw(*_pose_compose(q1, t1, q2, t2))
 
     def __mul__(self, other: RigidTransform | Rotation) -> RigidTransform:

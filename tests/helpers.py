@@ -110,8 +110,8 @@ def padded_call(f, x, *args, **kwargs):
 def undecorated(kernel, *static, matrix=()):
     """The function a component kernel's wrapper computes, with the kernel's ``custom_jvp``
     removed: its arguments split into components by slicing (a matrix, index in ``matrix``,
-    into its nine entries row by row), the results stacked on the last axis. JAX's derivative of
-    this is the reference a hand-written rule must equal."""
+    into its nine entries row by row), the results stacked on the last axis (a stacked result
+    as it is). JAX's derivative of this is the reference a hand-written rule must equal."""
 
     def split(i, x):
         if i in matrix:
@@ -119,7 +119,8 @@ def undecorated(kernel, *static, matrix=()):
         return tuple(x[..., k] for k in range(x.shape[-1]))
 
     def fun(*xs):
-        return jnp.stack(kernel.fun(*(split(i, x) for i, x in enumerate(xs)), *static), axis=-1)
+        out = kernel.fun(*(split(i, x) for i, x in enumerate(xs)), *static)
+        return out if isinstance(out, jax.Array) else jnp.stack(out, axis=-1)
 
     return fun
 

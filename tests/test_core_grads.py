@@ -734,9 +734,9 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     """quaternion_to_euler's custom jvp (and its transpose) equals JAX's own derivative of the
     forward code, everywhere: generic points of any norm, near and exactly at lock (where the
     forward code's selects define the gradient rule), 180 degrees; second derivatives too."""
-    from rotjax._euler import _quat_to_euler_parts, quat_to_euler
+    from rotjax._euler import _quat_to_euler_stacked, quat_to_euler
 
-    ref = undecorated(_quat_to_euler_parts, seq)
+    ref = undecorated(_quat_to_euler_stacked, seq, False)  # as for q read from memory
 
     q = _euler_test_quaternions(seq)
     rng = np.random.default_rng(5)

@@ -33,7 +33,7 @@ CASES = {
         rj.matrix_to_quaternion, [(3, 3)], (1, BYTES_SLACK, 180), (1, BYTES_SLACK, 470)
     ),
     "matrix_to_euler": (
-        lambda R: rj.matrix_to_euler(R, SEQ), [(3, 3)], (1, BYTES_SLACK, 500), (1, BYTES_SLACK, 780)
+        lambda R: rj.matrix_to_euler(R, SEQ), [(3, 3)], (1, BYTES_SLACK, 575), (1, BYTES_SLACK, 780)
     ),
     "quaternion_to_euler": (
         lambda q: rj.quaternion_to_euler(q, SEQ), [(4,)], (1, BYTES_SLACK, 370), (5, 2.3, 410)
@@ -128,7 +128,6 @@ NOT_FULL_WIDTH = {
     ("matrix_to_quaternion", "gradient", "float64"): 1,
     ("matrix_to_euler", "gradient", "float32"): 1,
     ("matrix_to_euler", "gradient", "float64"): 1,
-    ("matrix_to_euler", "forward", "float32"): 1,
 }
 
 _ARITHMETIC = r"= (?:fadd|fsub|fmul|fdiv|fneg|fcmp \w+) (?:\w+ )*"
@@ -255,8 +254,12 @@ COMPOSED = {
 # below are the single functions' (quaternion_to_euler's gradient, euler_to_matrix), whose
 # budgets above admit the same. And it writes each output of a program in a loop of its own
 # (no multi-output fusion), each reading the inputs it needs: the translation and the rotation
-# of a transform read the same matrix or quaternion.
+# of a transform read the same matrix or quaternion. as_euler computes one atan2 per output
+# angle, of arguments selected for it; after a producer of sines and cosines (from_euler) XLA
+# writes the quaternion and reads it back rather than compute them once per angle: 2^18
+# rotations, 6x faster than the single loop of three atan2 stacked on a leading axis.
 COMPOSED_SLACK = {
+    ("Rotation.from_euler().as_euler()", "forward"): 2.05,
     ("Rotation.from_quat().as_euler()", "gradient"): 2.3,
     ("Rotation.from_euler().as_matrix()", "forward"): 1.55,
     ("RigidTransform.inv", "forward"): 1.35,
