@@ -148,34 +148,95 @@ def jacobian_rows(f, x, *rows):
     return jax.tree_util.tree_map(shape, t)
 
 
+def hessian_rows(f, x, *rows):
+    """``jax.vmap(jax.hessian(f))(x, *rows)`` (the Hessian in ``x`` only, of an ``f`` that
+    returns one array) for a batch-native ``f``, as :func:`jacobian_rows` computes its Jacobian:
+    one jitted program, the JVP (along the basis directions) of the VJP (with the basis
+    cotangents), forward over reverse as ``jax.hessian`` differentiates, at the rows repeated
+    once per (output component, direction) pair. Shape ``(n, *out, *row_shape, *row_shape)``,
+    the last axes the forward direction, as ``jax.hessian``'s."""
+    x = np.asarray(x)
+    n, inner = x.shape[0], x.shape[1:]
+    d = int(np.prod(inner))
+    out = jax.eval_shape(f, x, *rows).shape[1:]
+    m = int(np.prod(out))
+    reps = [np.repeat(np.asarray(r), m * d, axis=0) for r in (x, *rows)]
+    # row (i, o, j): cotangent e_o (an output component), tangent e_j (an input component)
+    ct = np.tile(np.repeat(np.eye(m, dtype=x.dtype), d, axis=0), (n, 1)).reshape(-1, *out)
+    e = np.tile(np.eye(d, dtype=x.dtype), (n * m, 1)).reshape(-1, *inner)
+
+    def grad(y, c, *r):
+        return jax.vjp(lambda y: f(y, *r), y)[1](c)[0]
+
+    @jax.jit
+    def hess(e, a, c, *r):
+        return jax.jvp(lambda y: grad(y, c, *r), (a,), (e,))[1]
+
+    h = np.asarray(hess(e, *reps[:1], ct, *reps[1:])).reshape(n, *out, d, *inner)
+    return np.moveaxis(h, len(out) + 1, -1).reshape(n, *out, *inner, *inner)
+
+
+_CHECK_PROGRAMS: dict = {}
+
+
+def _check_programs(f, path):
+    """The function that :func:`check_grads` checks after the steps ``path`` ("fwd": its jvp,
+    "rev": its vjp of its own output) from ``f``, and its value, jvp and vjp, each jitted: kept
+    per ``f`` (the function object itself is the key, and is kept with them, so that a fresh
+    lambda never finds another's programs), so that a check of the same ``f`` at another point
+    of the same shapes, at another order or by another test runs them as they are, without
+    tracing them again. The value of a step is its parent's programs: after "fwd" the parent's
+    jitted jvp (the same program), after "rev" the parent's vjp applied to the parent's value
+    (the same function, by two programs already compiled, where a program of its own would
+    compile the parent's vjp again)."""
+    key = (f, path)
+    if key in _CHECK_PROGRAMS:
+        return _CHECK_PROGRAMS[key]
+    if not path:
+        g, fj = f, jax.jit(f)
+    else:
+        parent, parent_fj, parent_jvp, parent_pull = _check_programs(f, path[:-1])
+        if path[-1] == "fwd":
+            g, fj = partial(jax.jvp, parent), parent_jvp
+        else:
+
+            def g(*a):
+                out, vjp = jax.vjp(parent, *a)
+                return vjp(out)
+
+            def fj(*a):
+                return parent_pull(a, parent_fj(*a))
+
+    pull = jax.jit(lambda a, ct: jax.vjp(g, *a)[1](ct))
+    programs = g, fj, jax.jit(partial(jax.jvp, g)), pull
+    _CHECK_PROGRAMS[key] = programs
+    return programs
+
+
 def check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps=None):
     """``jax.test_util.check_grads`` with each program jitted: the same checks (the same random
     directions, finite differences, tolerances and assertions, by JAX's ``check_jvp`` and
     ``check_vjp``), but ``f``, its JVP and its VJP at each order are each one jitted program
     (the finite differences call the jitted ``f``), where the eager version dispatches the
-    derivatives of its parts one by one, each a program of its own."""
+    derivatives of its parts one by one, each a program of its own. The programs are kept per
+    ``f`` (:func:`_check_programs`): pass the same function object (``rj.nined_to_matrix``, a
+    module-level lambda) to check it at several points without tracing again."""
     eps = eps or 1e-4  # check_grads' default step
 
-    def check(f, args, order, err_msg):
-        fj = jax.jit(f)
+    def check(path, args, order, err_msg):
+        _, fj, jvp, pull = _check_programs(f, path)
         if "fwd" in modes:
             msg = f"JVP of {err_msg}" if err_msg else "JVP"
-            check_jvp(fj, jax.jit(partial(jax.jvp, f)), args, atol, rtol, eps, msg)
+            check_jvp(fj, jvp, args, atol, rtol, eps, msg)
             if order > 1:
-                check(partial(jax.jvp, f), (args, args), order - 1, msg)
+                check((*path, "fwd"), (args, args), order - 1, msg)
         if "rev" in modes:
             msg = f"VJP of {err_msg}" if err_msg else "VJP"
-            pull = jax.jit(lambda a, ct: jax.vjp(f, *a)[1](ct))
             check_vjp(fj, lambda *a: (fj(*a), partial(pull, a)), args, atol, rtol, eps, msg)
             if order > 1:
+                check((*path, "rev"), args, order - 1, msg)
 
-                def f_vjp(*a):
-                    out, vjp = jax.vjp(f, *a)
-                    return vjp(out)
-
-                check(f_vjp, args, order - 1, msg)
-
-    check(f, tuple(args), order, "")
+    check((), tuple(args), order, "")
 
 
 # --- one call of every public function ------------------------------------------------------
