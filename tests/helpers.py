@@ -154,9 +154,10 @@ def hessian_rows(f, x, *rows):
     ``jax.jacfwd(f)``, ``jax.jacrev(f)`` and ``jax.hessian(f)`` (forward over reverse) give
     them, computed as :func:`jacobian_rows` computes a Jacobian: one jitted program, the JVP
     along the basis directions of ``f`` and of its VJP with the basis cotangents, at the rows
-    repeated once per (output component, direction) pair. The same numbers, faster to compile
-    (no vmap of a Jacobian). Shapes ``(n, *out)``, ``(n, *out, *row_shape)`` (twice) and
-    ``(n, *out, *row_shape, *row_shape)``, the last axes the forward direction."""
+    repeated once per (output component, direction) pair. The same derivatives (to rounding:
+    XLA simplifies the two programs differently), faster to compile (no vmap of a Jacobian).
+    Shapes ``(n, *out)``, ``(n, *out, *row_shape)`` (twice) and ``(n, *out, *row_shape,
+    *row_shape)``, the last axes the forward direction."""
     x = np.asarray(x)
     n, inner = x.shape[0], x.shape[1:]
     d = int(np.prod(inner))
@@ -189,7 +190,8 @@ def forward_hessian_rows(f, x, *rows):
     """For a batch-native ``f`` returning one array: its Jacobian and its forward-over-forward
     second derivative (in ``x`` only) at each row, as ``jax.vmap`` of ``jax.jacfwd(f)`` and
     ``jax.jacfwd(jax.jacfwd(f))`` give them: one jitted JVP of a JVP, along every pair of
-    basis directions, at the rows repeated once per pair (as :func:`jacobian_rows`). Shapes
+    basis directions, at the rows repeated once per pair (as :func:`jacobian_rows`; equal to
+    the vmapped ``jacfwd`` to rounding). Shapes
     ``(n, *out, *row_shape)`` and ``(n, *out, *row_shape, *row_shape)``, the last axes the
     outer direction."""
     x = np.asarray(x)
