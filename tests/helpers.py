@@ -149,34 +149,141 @@ def jacobian_rows(f, x, *rows):
     return jax.tree_util.tree_map(shape, t)
 
 
+def hessian_rows(f, x, *rows):
+    """For a batch-native ``f`` returning one array: its value, forward-mode Jacobian,
+    reverse-mode Jacobian and Hessian (in ``x`` only) at each row, as ``jax.vmap`` of ``f``,
+    ``jax.jacfwd(f)``, ``jax.jacrev(f)`` and ``jax.hessian(f)`` (forward over reverse) give
+    them, computed as :func:`jacobian_rows` computes a Jacobian: one jitted program, the JVP
+    along the basis directions of ``f`` and of its VJP with the basis cotangents, at the rows
+    repeated once per (output component, direction) pair. The same derivatives (to rounding:
+    XLA simplifies the two programs differently), faster to compile (no vmap of a Jacobian).
+    Shapes ``(n, *out)``, ``(n, *out, *row_shape)`` (twice) and ``(n, *out, *row_shape,
+    *row_shape)``, the last axes the forward direction."""
+    x = np.asarray(x)
+    n, inner = x.shape[0], x.shape[1:]
+    d = int(np.prod(inner))
+    out = jax.eval_shape(f, x, *rows).shape[1:]
+    m = int(np.prod(out))
+    reps = [np.repeat(np.asarray(r), m * d, axis=0) for r in (x, *rows)]
+    # row (i, o, j): cotangent e_o (an output component), tangent e_j (an input component)
+    ct = np.tile(np.repeat(np.eye(m, dtype=x.dtype), d, axis=0), (n, 1)).reshape(-1, *out)
+    e = np.tile(np.eye(d, dtype=x.dtype), (n * m, 1)).reshape(-1, *inner)
+
+    @jax.jit
+    def program(e, a, c, *r):
+        def value_and_grad(y):
+            value, vjp = jax.vjp(lambda y: f(y, *r), y)
+            return value, vjp(c)[0]
+
+        return jax.jvp(value_and_grad, (a,), (e,))
+
+    (value, grad), (jvp, hess) = jax.tree_util.tree_map(
+        np.asarray, program(e, *reps[:1], ct, *reps[1:])
+    )
+    value = value.reshape(n, m, d, *out)[:, 0, 0]
+    jac_fwd = np.moveaxis(jvp.reshape(n, m, d, *out)[:, 0], 1, -1).reshape(n, *out, *inner)
+    jac_rev = grad.reshape(n, m, d, *inner)[:, :, 0].reshape(n, *out, *inner)
+    hess = np.moveaxis(hess.reshape(n, m, d, *inner), 2, -1).reshape(n, *out, *inner, *inner)
+    return value, jac_fwd, jac_rev, hess
+
+
+def forward_hessian_rows(f, x, *rows):
+    """For a batch-native ``f`` returning one array: its Jacobian and its forward-over-forward
+    second derivative (in ``x`` only) at each row, as ``jax.vmap`` of ``jax.jacfwd(f)`` and
+    ``jax.jacfwd(jax.jacfwd(f))`` give them: one jitted JVP of a JVP, along every pair of
+    basis directions, at the rows repeated once per pair (as :func:`jacobian_rows`; equal to
+    the vmapped ``jacfwd`` to rounding). Shapes
+    ``(n, *out, *row_shape)`` and ``(n, *out, *row_shape, *row_shape)``, the last axes the
+    outer direction."""
+    x = np.asarray(x)
+    n, inner = x.shape[0], x.shape[1:]
+    d = int(np.prod(inner))
+    basis = np.eye(d, dtype=x.dtype)
+    reps = [np.repeat(np.asarray(r), d * d, axis=0) for r in (x, *rows)]
+    # row (i, j, k): inner direction e_j, outer direction e_k
+    e_in = np.tile(np.repeat(basis, d, axis=0), (n, 1)).reshape(-1, *inner)
+    e_out = np.tile(basis, (n * d, 1)).reshape(-1, *inner)
+
+    def program(e_in, e_out, a, *r):
+        def jvp(y):
+            return jax.jvp(lambda y: f(y, *r), (y,), (e_in,))[1]
+
+        return jax.jvp(jvp, (a,), (e_out,))
+
+    # Compiled without XLA's elementwise fusion: this program is all elementwise operations on
+    # the rows, which XLA:CPU fuses into loops that recompute each shared subexpression once per
+    # use (se3_log of se3_exp: 0.5 s a row to run); unfused it runs in microseconds. The same
+    # operations, in the same order.
+    args = (e_in, e_out, *reps)
+    compiled = jax.jit(program).lower(*args).compile({"xla_disable_hlo_passes": "fusion"})
+    jac, hess = (np.asarray(t) for t in compiled(*args))
+    out = jac.shape[1:]
+    jac = np.moveaxis(jac.reshape(n, d, d, *out)[:, :, 0], 1, -1).reshape(n, *out, *inner)
+    hess = np.moveaxis(hess.reshape(n, d, d, *out), (1, 2), (-2, -1))
+    return jac, hess.reshape(n, *out, *inner, *inner)
+
+
+_CHECK_PROGRAMS: dict = {}
+
+
+def _check_programs(f, path):
+    """The function that :func:`check_grads` checks after the steps ``path`` ("fwd": its jvp,
+    "rev": its vjp of its own output) from ``f``, and its value, jvp and vjp, each jitted: kept
+    per ``f`` (the function object itself is the key, and is kept with them, so that a fresh
+    lambda never finds another's programs), so that a check of the same ``f`` at another point
+    of the same shapes, at another order or by another test runs them as they are, without
+    tracing them again. The value of a step is its parent's programs: after "fwd" the parent's
+    jitted jvp (the same program), after "rev" the parent's vjp applied to the parent's value
+    (the same function, by two programs already compiled, where a program of its own would
+    compile the parent's vjp again)."""
+    key = (f, path)
+    if key in _CHECK_PROGRAMS:
+        return _CHECK_PROGRAMS[key]
+    if not path:
+        g, fj = f, jax.jit(f)
+    else:
+        parent, parent_fj, parent_jvp, parent_pull = _check_programs(f, path[:-1])
+        if path[-1] == "fwd":
+            g, fj = partial(jax.jvp, parent), parent_jvp
+        else:
+
+            def g(*a):
+                out, vjp = jax.vjp(parent, *a)
+                return vjp(out)
+
+            def fj(*a):
+                return parent_pull(a, parent_fj(*a))
+
+    pull = jax.jit(lambda a, ct: jax.vjp(g, *a)[1](ct))
+    programs = g, fj, jax.jit(partial(jax.jvp, g)), pull
+    _CHECK_PROGRAMS[key] = programs
+    return programs
+
+
 def check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps=None):
     """``jax.test_util.check_grads`` with each program jitted: the same checks (the same random
     directions, finite differences, tolerances and assertions, by JAX's ``check_jvp`` and
     ``check_vjp``), but ``f``, its JVP and its VJP at each order are each one jitted program
     (the finite differences call the jitted ``f``), where the eager version dispatches the
-    derivatives of its parts one by one, each a program of its own."""
+    derivatives of its parts one by one, each a program of its own. The programs are kept per
+    ``f`` (:func:`_check_programs`): pass the same function object (``rj.nined_to_matrix``, a
+    module-level lambda) to check it at several points without tracing again."""
     eps = eps or 1e-4  # check_grads' default step
 
-    def check(f, args, order, err_msg):
-        fj = jax.jit(f)
+    def check(path, args, order, err_msg):
+        _, fj, jvp, pull = _check_programs(f, path)
         if "fwd" in modes:
             msg = f"JVP of {err_msg}" if err_msg else "JVP"
-            check_jvp(fj, jax.jit(partial(jax.jvp, f)), args, atol, rtol, eps, msg)
+            check_jvp(fj, jvp, args, atol, rtol, eps, msg)
             if order > 1:
-                check(partial(jax.jvp, f), (args, args), order - 1, msg)
+                check((*path, "fwd"), (args, args), order - 1, msg)
         if "rev" in modes:
             msg = f"VJP of {err_msg}" if err_msg else "VJP"
-            pull = jax.jit(lambda a, ct: jax.vjp(f, *a)[1](ct))
             check_vjp(fj, lambda *a: (fj(*a), partial(pull, a)), args, atol, rtol, eps, msg)
             if order > 1:
+                check((*path, "rev"), args, order - 1, msg)
 
-                def f_vjp(*a):
-                    out, vjp = jax.vjp(f, *a)
-                    return vjp(out)
-
-                check(f_vjp, args, order - 1, msg)
-
-    check(f, tuple(args), order, "")
+    check((), tuple(args), order, "")
 
 
 # --- one call of every public function ------------------------------------------------------

@@ -11,6 +11,7 @@ from helpers import (
     SEQS,
     angle_diff,
     assert_close,
+    check_grads,
     is_proper,
     random_quaternions,
     sweep,
@@ -63,53 +64,9 @@ def _noisy_batch(seed):
     return R + np.array([0.0, 1e-3, 0.1])[:, None, None] * rng.normal(size=R.shape)
 
 
-# --- check_grads, each program compiled once per function ---------------------------------
-
-
-@functools.cache
-def _check_programs(f, path):
-    """The function that ``helpers.check_grads`` checks after the steps ``path`` ("fwd": its
-    jvp, "rev": its vjp of its own output) from ``f``, and its jitted value, jvp and vjp: kept,
-    so that a check of the same ``f`` (at another point of the same shapes, at another order,
-    by another test) runs them as they are."""
-    if not path:
-        g = f
-    else:
-        parent = _check_programs(f, path[:-1])[0]
-        if path[-1] == "fwd":
-            g = functools.partial(jax.jvp, parent)
-        else:
-
-            def g(*a):
-                out, vjp = jax.vjp(parent, *a)
-                return vjp(out)
-
-    pull = jax.jit(lambda a, ct: jax.vjp(g, *a)[1](ct))
-    return g, jax.jit(g), jax.jit(functools.partial(jax.jvp, g)), pull
-
-
-def _check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps=None):
-    """``helpers.check_grads``: the same checks (JAX's check_jvp and check_vjp, the same random
-    directions, finite differences and tolerances), each program jitted once per function
-    (``_check_programs``)."""
-    eps = eps or 1e-4  # check_grads' default step
-
-    def check(path, args, order, err_msg):
-        _, fj, jvp, pull = _check_programs(f, path)
-        if "fwd" in modes:
-            msg = f"JVP of {err_msg}" if err_msg else "JVP"
-            check_jvp(fj, jvp, args, atol, rtol, eps, msg)
-            if order > 1:
-                check((*path, "fwd"), (args, args), order - 1, msg)
-        if "rev" in modes:
-            msg = f"VJP of {err_msg}" if err_msg else "VJP"
-            check_vjp(
-                fj, lambda *a: (fj(*a), functools.partial(pull, a)), args, atol, rtol, eps, msg
-            )
-            if order > 1:
-                check((*path, "rev"), args, order - 1, msg)
-
-    check((), tuple(args), order, "")
+# check_grads keeps each function's jitted programs (helpers._check_programs): a check of the
+# same function (MATRIX_FUNCTIONS', OFF_SPHERE's) at another point, order or test runs them.
+_check_grads = check_grads
 
 
 # --- Euler programs shared by the tests of a sequence ---------------------------------------

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import assert_close, assert_same_rotation, check_grads, jacobian_rows
+from helpers import assert_close, assert_same_rotation, check_grads, hessian_rows, jacobian_rows
 from hypothesis import example, given
 from hypothesis import strategies as st
 from scipy.spatial.transform import RigidTransform as SciTf
@@ -465,11 +465,8 @@ def test_log_derivatives_finite_and_exact():
     wheres = ["zero", "tiny", "small", "threshold", "pi", "x_pi"]
     xi = _at(wheres)
 
-    def rev(x):  # differentiated forward again; the value and both Jacobians as aux
-        jr = jax.jacrev(_pose_log)(x)
-        return jr, (_pose_log(x), jax.jacfwd(_pose_log)(x), jr)
-
-    second, (value, fwd, back) = jax.jit(jax.vmap(jax.jacfwd(rev, has_aux=True)))(xi)
+    # one program: the value, both Jacobians and jax.hessian's forward-over-reverse Hessian
+    value, fwd, back, second = hessian_rows(_pose_log, xi)
     assert_close(value, xi, atol=1e-15 * 4)
     eye = np.broadcast_to(np.eye(6), (len(wheres), 6, 6))
     assert_close(fwd, eye, atol=4e-15)
