@@ -74,12 +74,12 @@ _check_grads = check_grads
 # of one sequence one after another, so that xdist's workers split the sequences between them,
 # not the tests of one sequence.)
 # Each Euler test of a sequence calls one compiled program per public function: its values,
-# jvp and vjp, for a batch of a fixed number of rows (the rows of an input, in batches padded
-# with copies of the first row). Compiling these programs is most of such a test's time; once
-# one test of a sequence has compiled them, its other tests and parameters run them as they are.
-
-# (euler_to_matrix's jvp compiles to a slower program for a batch than for one point)
-_ROWS = {"matrix_to_euler": 48, "quaternion_to_euler": 48, "euler_to_quaternion": 48}
+# jvp and vjp, at one point (a batch of one row), called row by row. Compiling these programs is
+# most of such a test's time; once one test of a sequence has compiled them, its other tests and
+# parameters run them as they are. One point, not a batch: XLA:CPU vectorises a batch's loop,
+# and LLVM's vectorised code for a derivative program takes 2-2.5x as long to compile (the
+# values are those of the batched program, to an ulp of fused multiply-adds).
+_ROWS: dict = {}
 _EULER_OUT = {
     "matrix_to_euler": (3,),
     "quaternion_to_euler": (3,),
@@ -671,7 +671,9 @@ def _assert_rule_equals_autodiff(rule, ref, x, dx, ct, min_same=None):
     code rounds its primal differently, by an ulp or so; where that moves a point across a lock
     test, it differentiates another branch). Returns the rule's primal."""
     out, jv, gr = rule
-    out_ref, jv_ref, gr_ref = (np.asarray(a) for a in _derivatives(ref, x, dx, ct))
+    # row by row, as the rule's rows (`_euler`): the same compiled code for both
+    rows = [_derivatives(ref, *(a[i : i + 1] for a in (x, dx, ct))) for i in range(len(x))]
+    out_ref, jv_ref, gr_ref = (np.concatenate(r) for r in zip(*rows, strict=True))
     if min_same is None:
         np.testing.assert_array_equal(out, out_ref)
         same = np.ones(out.shape[:-1], bool)
@@ -719,13 +721,19 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     ct = rng.normal(size=(len(q), 3))
     rule = _euler("quaternion_to_euler", seq, q, dq, ct)
     _assert_rule_equals_autodiff(rule, ref, q, dq, ct)
-    # second derivatives, compiled once for both points: generic, exact lock (the rule's by
-    # JAX's hessian, forward over reverse; the reference's forward over forward)
-    hess = jax.jit(jax.hessian(lambda x: quat_to_euler(x, seq)))
-    hess_ref = jax.jit(jax.jacfwd(jax.jacfwd(ref)))
+    # second derivatives at a generic point and at exact lock: the rule's forward over reverse
+    # (as jax.hessian), the reference's forward over forward (as jacfwd of jacfwd), each one
+    # program at one point called along each basis direction and cotangent (a vmapped
+    # Jacobian's batch would compile 2x slower)
+    f = functools.partial(quat_to_euler, seq=seq)
+    hvp = jax.jit(lambda x, e, c: jax.jvp(lambda y: jax.vjp(f, y)[1](c)[0], (x,), (e,))[1])
+    ffd = jax.jit(lambda x, e, d: jax.jvp(lambda y: jax.jvp(ref, (y,), (e,))[1], (x,), (d,))[1])
+    eye4, eye3 = np.eye(4), np.eye(3)
     for x in (q[0] / np.linalg.norm(q[0]), q[-4]):
-        h, h_ref = hess(jnp.asarray(x)), hess_ref(jnp.asarray(x))
-        assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
+        # [output, inner direction, outer direction]
+        h = np.array([[hvp(x, e, c) for e in eye4] for c in eye3]).swapaxes(1, 2)
+        h_ref = np.moveaxis(np.array([[ffd(x, e, d) for d in eye4] for e in eye4]), -1, 0)
+        assert_close(h, h_ref, atol=1e-13 * (1 + np.abs(h_ref).max()))
 
 
 def test_euler_derivative_of_zero_and_nonfinite_quaternions():
