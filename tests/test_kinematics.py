@@ -621,15 +621,17 @@ def _inputs(shape, dtype=np.float64, seed=18):
     a = rng.uniform(-3, 3, size=(*shape, 3)).astype(dtype)
     w = rng.normal(size=(*shape, 3)).astype(dtype)
     q = rng.normal(size=(*shape, 4)).astype(dtype)
-    with jax.disable_jit():
-        R = np.asarray(rj.quaternion_to_matrix(q))
-    return a, w, q, R
+    # the matrices of the (normalised) quaternions, by scipy: no program compiled
+    R = Rotation.from_quat(q.reshape(-1, 4).astype(np.float64)).as_matrix()
+    return a, w, q, R.reshape(*shape, 3, 3).astype(dtype)
 
 
 @pytest.mark.parametrize("shape", sweep(BATCH_SHAPES, fast=[(3, 1, 2, 1)]), ids=str)
 def test_batch_vmap_agree(shape):
     """Batched inputs and vmap over the first axis agree (run op by op; the compiled path is
-    checked in test_jit_batched_agrees, single samples in test_broadcasting_between_arguments)."""
+    checked in test_jit_batched_agrees, single samples in test_broadcasting_between_arguments).
+    Op by op on purpose: the primitives compiled here are the ones test_jit_batched_agrees'
+    reference runs (same shape), where a compiled program of each would cost more."""
     a, w, q, R = _inputs((4, *shape))
     with jax.disable_jit():
         batched = _all_public(a, w, q, R)
@@ -667,7 +669,8 @@ def test_broadcasting_between_arguments():
             rj.integrate_angular_velocity(q[2, 0], w2[0, 1], 0.3),
         )
 
-    out, full, damped, one, qd, qn, qn_one = jax.jit(fn)(a, w2, q, d, dts)
+    outs = jax.jit(fn)(a, w2, q, d, dts)
+    out, full, damped, one, qd, qn, qn_one = (np.asarray(x) for x in outs)
     assert out.shape == (3, 5, 3)
     assert_close(out, full, atol=0)
     assert_close(damped[1, 2], one, atol=1e-15)
@@ -771,6 +774,11 @@ def test_motion_angular_velocity_matches_scipy():
         np.testing.assert_allclose(d.as_rotvec() / (2 * h), w, atol=1e-8)
 
 
+@jax.jit(static_argnames=("frame", "method"))
+def _samples_jit(q0, w, dt, frame, method):
+    return rj.integrate_angular_velocity_samples(q0, w, dt, frame, method)
+
+
 @pytest.mark.parametrize("frame", FRAMES)
 @pytest.mark.parametrize(
     ("method", "order"),
@@ -786,11 +794,12 @@ def test_sample_integration_orders(method, order, frame):
     as dt halves, so the ratios wobble by up to 0.16 for magnus4)."""
     errs = []
     for steps in (16, 32, 64):
-        t = np.linspace(0.0, 2.0, steps + 1)
-        q_true, w = _motion(t, frame)
-        with jax.disable_jit():  # op by op: no compilation per log length
-            q = rj.integrate_angular_velocity_samples(q_true[0], w, 2.0 / steps, frame, method)
-        errs.append(_chordal(q, q_true))
+        # One log length for every interval (one compiled program): 65 samples of the motion
+        # (defined beyond t = 2), of which the first steps + 1 cover [0, 2].
+        dt = 2.0 / steps
+        q_true, w = _motion(dt * np.arange(65), frame)
+        q = _samples_jit(q_true[0], w, np.float64(dt), frame, method)
+        errs.append(_chordal(np.asarray(q)[: steps + 1], q_true[: steps + 1]))
     observed = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     assert np.all(np.abs(observed - order) < 0.25), observed
 

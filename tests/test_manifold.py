@@ -15,7 +15,8 @@ from rotjax import manifold
 
 RNG = np.random.default_rng(35)
 Q = random_quaternions(6, seed=35)
-XI = np.concatenate([rj.quaternion_to_rotvec(Q[:4]), RNG.normal(size=(4, 3))], axis=-1)
+# by scipy: a rotjax call here would compile at collection, in every worker
+XI = np.concatenate([SRotation.from_quat(Q[:4]).as_rotvec(), RNG.normal(size=(4, 3))], axis=-1)
 
 
 def _params(dtype=np.float64):
