@@ -33,10 +33,12 @@ README, every page under docs/, then the docstring check and examples).
 
 import ast
 import functools
+import os
 import re
 import subprocess
 import sys
 import traceback
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 BLOCK = re.compile(r"^```python\n(.*?)^```", flags=re.S | re.M)
@@ -263,12 +265,15 @@ def main(argv: list[str]) -> int:
         print(f"DOCS CHECK: {e}", file=sys.stderr)
     runs = [[str(p)] for p in files if BLOCK.search(p.read_text())]
     if not argv:
-        runs.append([DOCSTRINGS])
-    codes = [
-        subprocess.run([sys.executable, __file__, *run], stdout=subprocess.DEVNULL).returncode
-        for run in runs
-    ]
+        runs.insert(0, [DOCSTRINGS])  # the longest run first
+    # one process per page (and one for the docstrings), as many at a time as there are cores
+    with ThreadPoolExecutor(os.cpu_count() or 1) as pool:
+        codes = list(pool.map(_run_process, runs))
     return 1 if errors or any(codes) else 0
+
+
+def _run_process(run: list[str]) -> int:
+    return subprocess.run([sys.executable, __file__, *run], stdout=subprocess.DEVNULL).returncode
 
 
 if __name__ == "__main__":
