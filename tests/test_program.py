@@ -61,12 +61,34 @@ CASES = {
 _FUSION = re.compile(r"^\s*(?:ROOT\s+)?\S+ = \S+ fusion\(", re.MULTILINE)
 
 
-def _program(f, shapes, dtype):
+# These tests read XLA's optimised program (its fusions, bytes and flops), which XLA's passes
+# make before LLVM compiles the loops: they compile with LLVM's optimisation off (about a third
+# less compile time), which leaves that program as it is (test_llvm_level_leaves_the_program).
+_STRUCTURE_ONLY = {"xla_backend_optimization_level": 0}
+_METADATA = re.compile(r", metadata=\{[^}]*\}")
+
+
+def _compiled(f, shapes, dtype, options=_STRUCTURE_ONLY):
     args = [jax.ShapeDtypeStruct((N, *s), dtype) for s in shapes]
-    compiled = jax.jit(f).lower(*args).compile()
+    return jax.jit(f).lower(*args).compile(options)
+
+
+def _program(f, shapes, dtype):
+    compiled = _compiled(f, shapes, dtype)
     cost = compiled.cost_analysis()
     cost = cost[0] if isinstance(cost, (list, tuple)) else cost
     return len(_FUSION.findall(compiled.as_text())), cost["bytes accessed"] / N, cost["flops"] / N
+
+
+def test_llvm_level_leaves_the_program():
+    """The optimised program these tests read, with LLVM's optimisation off, is the one
+    compiled by default: the same text (but for source locations), bytes and flops."""
+    f = lambda p, q, v: (rj.Rotation.from_quat(p) * rj.Rotation.from_quat(q)).apply(v)  # noqa: E731
+    g = jax.grad(lambda *a: jnp.sum(f(*a)))
+    for h in (f, g):
+        a, b = (_compiled(h, [(4,), (4,), (3,)], jnp.float32, o) for o in (_STRUCTURE_ONLY, None))
+        assert _METADATA.sub("", a.as_text()) == _METADATA.sub("", b.as_text())
+        assert a.cost_analysis() == b.cost_analysis()
 
 
 def _check(what, program, budget, io_bytes):
