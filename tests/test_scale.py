@@ -273,10 +273,10 @@ def test_euler_gradients_near_lock_at_every_distance(seq):
         for which in ("A", "C"):
             pairs = [_near_lock(seq, dl, which) for dl in deltas]
             qs = jnp.asarray(np.array([p[0] for p in pairs]), dtype=dtype)
-            jq = np.asarray(_JAC_Q(qs, seq))
+            jq = np.asarray(_jac_q(qs, seq))
             assert np.all(np.isfinite(jq)), (dtype, which)
             if with_matrix:
-                jm = np.asarray(_JAC_R(rj.quaternion_to_matrix(qs), seq))
+                jm = np.asarray(_jac_r(rj.quaternion_to_matrix(qs), seq))
                 assert np.all(np.isfinite(jm)), (dtype, which)
                 assert np.abs(jm[:-2]).max() > 1 / (8 * deltas[-3]), (dtype, which)
             for (q, abcd), j, dl in zip(pairs, jq, deltas, strict=True):
@@ -286,14 +286,31 @@ def test_euler_gradients_near_lock_at_every_distance(seq):
                     assert err < 16 * np.finfo(dtype).eps, (dtype, which, dl, err)
 
 
-_JAC_Q = jax.jit(
-    lambda qs, seq: jax.vmap(jax.jacfwd(lambda q: rj.quaternion_to_euler(q, seq)))(qs),
-    static_argnums=1,
-)
-_JAC_R = jax.jit(
-    lambda rs, seq: jax.vmap(jax.jacrev(lambda m: rj.matrix_to_euler(m, seq)))(rs),
-    static_argnums=1,
-)
+# The Jacobians, as vmap(jacfwd) and vmap(jacrev) give them, by one-point programs called
+# along each basis direction (forward) or cotangent (reverse): a batch's vectorised loop takes
+# LLVM twice as long to compile.
+@functools.partial(jax.jit, static_argnums=2)
+def _jvp_q(q, e, seq):
+    return jax.jvp(lambda x: rj.quaternion_to_euler(x, seq), (q,), (e,))[1]
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def _vjp_r(m, c, seq):
+    return jax.vjp(lambda x: rj.matrix_to_euler(x, seq), m)[1](c)[0]
+
+
+def _jac_q(qs, seq):
+    """``(n, 3, 4)``: forward mode, column by column."""
+    qs = np.asarray(qs)  # rows by NumPy: indexing a JAX array compiles a program
+    eye = np.eye(4, dtype=qs.dtype)
+    return np.array([np.stack([_jvp_q(q, e, seq) for e in eye], axis=-1) for q in qs])
+
+
+def _jac_r(rs, seq):
+    """``(n, 3, 3, 3)``: reverse mode, row by row."""
+    rs = np.asarray(rs)
+    eye = np.eye(3, dtype=rs.dtype)
+    return np.array([np.stack([_vjp_r(m, c, seq) for c in eye]) for m in rs])
 
 
 @pytest.mark.parametrize("dtype", list(SCALES))
