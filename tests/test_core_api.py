@@ -361,18 +361,23 @@ def test_every_public_function_is_listed_for_the_precision_check():
     assert public == listed, (public - listed, listed - public)
 
 
+def _value_and_sum_gradient(f):
+    """``f``'s outputs and the gradient of the sum of all their elements (by one VJP)."""
+
+    def both(*a):
+        out, vjp = jax.vjp(f, *a)
+        return out, vjp(jax.tree.map(jnp.ones_like, out))
+
+    return both
+
+
 def _dot_generals(f, args):
-    """The ``dot_general`` lines of the StableHLO of ``f`` and of its reverse-mode gradient."""
-
-    def loss(*a):
-        return sum(jnp.sum(o) for o in jax.tree.leaves(f(*a)))
-
-    grad = jax.grad(loss, argnums=tuple(range(len(args))))
-    lines = []
-    for g in (f, grad):
-        text = jax.jit(g).lower(*args).as_text()
-        lines += [ln.strip() for ln in text.splitlines() if "dot_general" in ln]
-    return lines
+    """The ``dot_general`` lines of the StableHLO of ``f`` and of its reverse-mode gradient (of
+    the sum of its outputs, in every argument): one program that returns both (one trace and
+    lowering, where ``f`` and its gradient were two). Its lines hold those of each: the values
+    are returned (no forward product is dropped) and the gradient is the same VJP."""
+    text = jax.jit(_value_and_sum_gradient(f)).lower(*args).as_text()
+    return [ln.strip() for ln in text.splitlines() if "dot_general" in ln]
 
 
 @pytest.mark.parametrize("name", sweep(sorted(EVERY_PUBLIC), fast=sorted(EVERY_PUBLIC)[1::4]))
@@ -419,16 +424,6 @@ def _batched(name, args, batch):
     lead = batch + ((3,) if name in SET_AXIS else ())
     n = int(np.prod(lead, dtype=int))
     return [np.asarray(x)[:n].reshape((*lead, *np.shape(x)[1:])) for x in args]
-
-
-def _value_and_sum_gradient(f):
-    """``f``'s outputs and the gradient of the sum of all their elements (by one VJP)."""
-
-    def both(*a):
-        out, vjp = jax.vjp(f, *a)
-        return out, vjp(jax.tree.map(jnp.ones_like, out))
-
-    return both
 
 
 BATCHWISE = sorted(n for n in EVERY_PUBLIC_64 if n not in NOT_BATCHWISE)

@@ -1,18 +1,41 @@
 """The 4x4 top-eigenvector kernel: accuracy against mpmath, scale, bad input, derivatives."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import mpmath
 import numpy as np
 import pytest
-from helpers import check_grads, sweep
+from helpers import check_grads, hessian_rows, sweep
 from scipy.spatial.transform import Rotation
 
 import rotjax as rj
-from rotjax._eigen import _CHUNK, top_eigenvector
+from rotjax._eigen import _CHUNK, _polar, davenport_k, pow2_scale, top_eigenvector
 
 mpmath.mp.dps = 40
 _top = jax.jit(top_eigenvector)
+_polar_jit = jax.jit(_polar)  # one program per shape and dtype, shared by the tests
+# jitted: one program per shape and dtype (eager, each operation compiles one)
+_davenport_k = jax.jit(davenport_k)
+_scaled_k = jax.jit(lambda B: davenport_k(pow2_scale(B, (-2, -1))))
+_pow2_scale = jax.jit(lambda B: pow2_scale(B, (-2, -1)))
+
+
+def _np_davenport_k(B):
+    """``davenport_k`` in NumPy, the same operations in the same order (sums and differences,
+    and exact doublings: the same numbers), for test data built at import without compiling."""
+    b = [[B[..., i, j] for j in range(3)] for i in range(3)]
+    tr = b[0][0] + b[1][1] + b[2][2]
+    sxy, sxz, syz = b[0][1] + b[1][0], b[0][2] + b[2][0], b[1][2] + b[2][1]
+    ax, ay, az = b[2][1] - b[1][2], b[0][2] - b[2][0], b[1][0] - b[0][1]
+    rows = (
+        (2 * b[0][0] - tr, sxy, sxz, ax),
+        (sxy, 2 * b[1][1] - tr, syz, ay),
+        (sxz, syz, 2 * b[2][2] - tr, az),
+        (ax, ay, az, tr),
+    )
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 def _mp_top(K):
@@ -29,9 +52,7 @@ def _bar_itzhack(sigma, n, seed, flip=False):
     M = Rotation.random(n, random_state=seed).as_matrix() + sigma * rng.standard_normal((n, 3, 3))
     if flip:
         M = M * np.array([1.0, 1.0, -1.0])
-    from rotjax._eigen import davenport_k
-
-    return np.asarray(davenport_k(jnp.asarray(M)))
+    return _np_davenport_k(M)
 
 
 def _cases():
@@ -67,10 +88,10 @@ def test_top_eigenvector_against_mpmath(name, dtype):
     "dtype,scales", [(np.float32, [1e-30, 1e30]), (np.float64, [1e-300, 1e300])]
 )
 def test_optimal_scale_invariant(dtype, scales):
-    R = jnp.asarray(Rotation.random(8, random_state=3).as_matrix(), dtype)
+    R = Rotation.random(8, random_state=3).as_matrix().astype(dtype)
     q = rj.matrix_to_quaternion(R, method="optimal")
     for s in scales:
-        qs = rj.matrix_to_quaternion(R * jnp.asarray(s, dtype), method="optimal")
+        qs = rj.matrix_to_quaternion(R * dtype(s), method="optimal")  # NumPy: no eager op
         np.testing.assert_allclose(qs, q, atol=4 * np.finfo(dtype).eps)
 
 
@@ -89,9 +110,12 @@ def test_bad_input_gives_nan():
     assert np.isnan(rj.nined_to_matrix(x)).all()  # inf in [0], the zero matrix in [1]
     assert np.isnan(rj.align_vectors(np.ones((3, 3)), np.ones((3, 3)), np.zeros(3))).all()
     assert np.isnan(rj.quaternion_mean(np.ones((3, 4)), np.zeros(3))).all()
-    # in a batch run in chunks, the NaN stays in its own element
+    # in a batch run in chunks (padded: not a whole number of chunks), the NaN stays in its own
+    # element; the batch of test_chunked_batches_agree_with_one_piece's float64 public call,
+    # whose program this shares
     chunk = _CHUNK[np.dtype(np.float64)]
-    B = np.broadcast_to(np.eye(3), (2 * chunk + 3, 3, 3)).copy()
+    B = np.broadcast_to(np.eye(3), (2 * chunk + 4, 3, 3)).copy()
+    assert len(B) % chunk
     B[5], B[chunk + 1, 1, 2] = 0.0, np.inf
     bad = np.zeros(len(B), bool)
     bad[[5, chunk + 1]] = True
@@ -99,7 +123,7 @@ def test_bad_input_gives_nan():
         lambda B: rj.matrix_to_quaternion(B, method="optimal"),
         lambda B: rj.nined_to_matrix(B.reshape(-1, 9)),
     ):
-        out = np.asarray(jax.jit(f)(jnp.asarray(B))).reshape(len(B), -1)
+        out = np.asarray(f(B)).reshape(len(B), -1)  # each one compiled program
         assert np.isnan(out[bad]).all() and np.isfinite(out[~bad]).all()
     with pytest.raises(ValueError, match="empty"):
         rj.quaternion_mean(np.ones((0, 4)))
@@ -125,14 +149,20 @@ def test_second_derivatives(k):
     ``matrix_to_quaternion`` is finite (sign-free matrix outputs, so the ``w >= 0`` choice at
     180 degrees does not matter). The Hessians of all four points are one jitted program."""
     check_grads(rj.nined_to_matrix, (POINTS[k].reshape(9),), order=2, modes=["fwd", "rev"])
-    assert np.isfinite(_optimal_hessians(jnp.asarray(POINTS))[k]).all()
+    assert np.isfinite(_optimal_hessians()[k]).all()
 
 
-@jax.jit
-@jax.vmap
-@jax.hessian
-def _optimal_hessians(M):
+def _optimal(M):
     return rj.matrix_to_quaternion(M, method="optimal")
+
+
+@functools.cache
+def _optimal_hessians():
+    """The Hessians of the optimal ``matrix_to_quaternion`` at the four points, ``(4, 4, 3, 3,
+    3, 3)``: ``jax.vmap(jax.hessian(f))`` to rounding (forward over reverse), by
+    ``helpers.hessian_rows``' one jitted program (no vmapped ``jacfwd(jacrev)``, slow to
+    compile), computed once for the four cases."""
+    return hessian_rows(_optimal, POINTS)[3]
 
 
 @pytest.mark.slow
@@ -140,11 +170,15 @@ def test_mean_and_align_hessians_finite():
     """The full Hessians of ``quaternion_mean`` at identical quaternions (ties among the lower
     eigenvalues) and of ``align_vectors`` at orthonormal pairs are finite; the mean's first and
     second derivatives match finite differences there."""
-    q = jnp.tile(jnp.array([0.1, 0.2, 0.3, 0.9]), (3, 1))
-    assert np.isfinite(jax.jit(jax.hessian(rj.quaternion_mean))(q)).all()
-    check_grads(lambda q: rj.quaternion_mean(q), (q,), order=2, modes=["fwd", "rev"])
-    a = jnp.eye(3)
-    assert np.isfinite(jax.jit(jax.hessian(lambda a: rj.align_vectors(a, jnp.eye(3))))(a)).all()
+    q = np.tile(np.array([0.1, 0.2, 0.3, 0.9]), (3, 1))
+    # jax.hessian's (forward over reverse) Hessians, to rounding, by one jitted program each
+    # (helpers.hessian_rows; a leading axis of one row), not a vmapped jacfwd(jacrev)
+    hess = hessian_rows(rj.quaternion_mean, q[None])[3][0]
+    assert hess.shape == (4, 3, 4, 3, 4) and np.isfinite(hess).all()
+    check_grads(rj.quaternion_mean, (q,), order=2, modes=["fwd", "rev"])
+    a = np.eye(3)
+    hess = hessian_rows(lambda a: rj.align_vectors(a, np.eye(3)), a[None])[3][0]
+    assert hess.shape == (4, 3, 3, 3, 3) and np.isfinite(hess).all()
 
 
 def _spectral(lam, seed, n=12):
@@ -154,9 +188,7 @@ def _spectral(lam, seed, n=12):
 
 
 def _from_b(B):
-    from rotjax._eigen import davenport_k
-
-    return np.asarray(davenport_k(jnp.asarray(B)))
+    return _np_davenport_k(np.asarray(B, np.float64))
 
 
 _RNG = np.random.default_rng(21)
@@ -211,23 +243,24 @@ def test_chunked_batches_agree_with_one_piece(chunks, dtype):
     """Large batches run in chunks on the CPU (padded where the batch is not a multiple; the
     chunk size depends on the dtype): the same vectors as the kernel applied in one piece, in
     every batch element (up to rounding, which near-ties among random matrices amplify)."""
-    from rotjax._eigen import _by_chunks, _polar
+    from rotjax._eigen import _by_chunks
 
     whole_chunks, extra = chunks
     n = whole_chunks * _CHUNK[np.dtype(dtype)] + extra
     tol = 1e-12 if dtype == np.float64 else 1e-5  # on 1 - |cos|: angles of 1e-6 and 3e-3
     rng = np.random.default_rng(n)
-    B = jnp.asarray(rng.standard_normal((n, 3, 3)), dtype)
+    B = rng.standard_normal((n, 3, 3)).astype(dtype)  # NumPy: no eager operations below
     chunked, _, (vc, _) = jax.jit(lambda B: _by_chunks(_polar, B))(B)
-    whole, _, (vw, _) = jax.jit(_polar)(B)
+    whole, _, (vw, _) = _polar_jit(B)
+    chunked, vc, whole, vw = (np.asarray(x) for x in (chunked, vc, whole, vw))
     assert chunked.shape == (n, 4) and vc.shape == (n, 3, 3)
     assert np.abs(np.abs(np.sum(chunked * whole, axis=-1)) - 1).max() <= tol
     assert np.abs(np.abs(np.sum(vc * vw, axis=-2)) - 1).max() <= tol  # columns, up to sign
     # a batch of two leading axes through the public function: the same per element
     m = n // 2 * 2
-    q = rj.matrix_to_quaternion(B[:m].reshape(2, -1, 3, 3), method="optimal")
+    q = np.asarray(rj.matrix_to_quaternion(B[:m].reshape(2, -1, 3, 3), method="optimal"))
     assert q.shape == (2, m // 2, 4)
-    flat = rj.matrix_to_quaternion(B[:m], method="optimal")
+    flat = np.asarray(rj.matrix_to_quaternion(B[:m], method="optimal"))
     assert np.abs(np.abs(np.sum(q.reshape(m, 4) * flat, axis=-1)) - 1).max() <= tol
 
 
@@ -237,11 +270,11 @@ def test_the_rules_decomposition(name):
     singular vectors ``V`` are orthonormal and diagonalise ``H = Q^T B`` (prescaled) with the
     signed singular values ``s``, so that ``tr(H) I - H = V diag(s_k + s_l) V^T``; ``sum(s)`` is
     the top eigenvalue of ``K(B)`` and the gaps ``s_k + s_l`` to it are not negative."""
-    from rotjax._eigen import _k_to_b, _polar, davenport_k, pow2_scale
+    from rotjax._eigen import _k_to_b
 
-    B = _k_to_b(jnp.asarray(CASES[name]))
-    _, Q, (V, s) = jax.jit(_polar)(B)
-    Bs = np.asarray(pow2_scale(B, (-2, -1)))
+    B = jax.jit(_k_to_b)(CASES[name])
+    _, Q, (V, s) = _polar_jit(B)
+    Bs = np.asarray(_pow2_scale(B))
     Q, V, s = np.asarray(Q), np.asarray(V), np.asarray(s)
     H = np.swapaxes(Q, -1, -2) @ Bs
     scale = np.abs(Bs).max()
@@ -249,7 +282,7 @@ def test_the_rules_decomposition(name):
         np.swapaxes(V, -1, -2) @ V, np.broadcast_to(np.eye(3), V.shape), atol=1e-14
     )
     np.testing.assert_allclose(H @ V, V * s[:, None, :], atol=1e-13 * scale)
-    lam = np.linalg.eigvalsh(np.asarray(davenport_k(jnp.asarray(Bs))))
+    lam = np.linalg.eigvalsh(np.asarray(_davenport_k(Bs)))
     np.testing.assert_allclose(s.sum(-1), lam[:, -1], atol=1e-13 * scale)
     gaps = s.sum(-1, keepdims=True) - s
     assert (gaps >= -1e-13 * scale).all()
@@ -314,8 +347,6 @@ def test_optimal_half_turns_stable_under_rounding(dtype):
 def test_kernel_singular_values_give_the_eigenvalues(dtype):
     """The derivative rule takes the eigenvalues of ``K`` from the kernel's signed singular
     values ``s`` of the prescaled ``B``: ``sum(s)`` and ``sum(s) - 2 (s_k + s_l)``."""
-    from rotjax._eigen import _polar, davenport_k, pow2_scale
-
     rng = np.random.default_rng(43)
     R = Rotation.random(48, random_state=43).as_matrix()
     B = np.concatenate(
@@ -327,11 +358,11 @@ def test_kernel_singular_values_give_the_eigenvalues(dtype):
             1e-20 * (R + 0.1 * rng.standard_normal((48, 3, 3))),
         ]
     ).astype(dtype)
-    _, _, (_, s) = jax.jit(_polar)(B)
+    _, _, (_, s) = _polar_jit(B)
     s = np.asarray(s, np.float64)
     t = s.sum(-1, keepdims=True)
     lam = np.sort(np.concatenate([t, t - 2 * (t - s)], -1), -1)
-    K = np.asarray(davenport_k(pow2_scale(jnp.asarray(B), (-2, -1))), np.float64)
+    K = np.asarray(_scaled_k(B), np.float64)
     ref = np.linalg.eigvalsh(K)
     assert np.abs(lam - ref).max() <= 16 * np.finfo(dtype).eps * np.abs(ref).max()
 
@@ -393,12 +424,10 @@ def test_kernel_converges_on_many_noisy_matrices(scale, noise, dtype):
     average: a backward-stable top eigenvector of K (residual within a few eps |K|) for 20000
     noisy rotations (scale -1: det < 0); a sweep fewer, or a last sweep without the rotations of
     the largest column, leaves thousands of them off by 1e2-1e4 eps."""
-    from rotjax._eigen import _polar, davenport_k, pow2_scale
-
     R = Rotation.random(20000, random_state=47).as_matrix()
     B = (scale * R + noise * np.random.default_rng(47).standard_normal(R.shape)).astype(dtype)
-    v = np.asarray(jax.jit(_polar)(B)[0], np.float64)
-    K = np.asarray(davenport_k(pow2_scale(jnp.asarray(B), (-2, -1))), np.float64)
+    v = np.asarray(_polar_jit(B)[0], np.float64)
+    K = np.asarray(_scaled_k(B), np.float64)
     Kv = np.einsum("nij,nj->ni", K, v)
     rho = np.einsum("ni,ni->n", v, Kv)
     res = np.linalg.norm(Kv - rho[:, None] * v, axis=-1) / np.abs(K).max(axis=(-2, -1))

@@ -11,6 +11,7 @@ import pytest
 from helpers import (
     BATCH_SHAPES,
     DTYPES,
+    _check_programs,
     assert_close,
     assert_same_rotation,
     check_grads,
@@ -24,10 +25,41 @@ from scipy.spatial.transform import Rotation, Slerp
 import rotjax as rj
 
 METHODS = ["svd", "q-method"]
+# Each method's call, one function object per method: check_grads and rev_jacobian keep their
+# programs per function object, so the tests of a method (and shape) share them.
+ALIGN = {m: partial(rj.align_vectors, method=m) for m in METHODS}
 
 
 def random_rotations(n, seed=0):
-    return np.asarray(rj.quaternion_to_matrix(random_quaternions(n, seed)))
+    """Matrices of random rotations, by scipy: no program per ``n`` compiled for test data."""
+    return Rotation.from_quat(random_quaternions(n, seed)).as_matrix()
+
+
+def rev_jacobian(f, args):
+    """The Jacobians of ``f(*args)`` (each output leaf, in each argument), by reverse mode: the
+    jitted VJP of ``f`` that :func:`helpers.check_grads` keeps for ``f`` (the same program,
+    compiled once, where ``f`` is checked at these shapes too), applied to each basis cotangent
+    in turn. The numbers of ``jax.jacobian(f, argnums=range(len(args)))``, without its
+    vmapped VJP (one more program, slow to compile). Leaves ``(*out, *arg)`` per output leaf,
+    a tuple over the arguments."""
+    _, fj, _, pull = _check_programs(f, ())
+    out = fj(*args)
+    leaves, tree = jax.tree.flatten(out)
+    leaves = [np.asarray(o) for o in leaves]
+    jac = []
+    for k, o in enumerate(leaves):
+        rows = []
+        for idx in np.ndindex(o.shape):
+            ct = [np.zeros_like(x) for x in leaves]
+            ct[k][idx] = 1
+            rows.append([np.asarray(g) for g in pull(tuple(args), jax.tree.unflatten(tree, ct))])
+        jac.append(
+            tuple(
+                np.stack([r[i] for r in rows]).reshape(*o.shape, *np.shape(args[i]))
+                for i in range(len(args))
+            )
+        )
+    return jax.tree.unflatten(tree, jac)
 
 
 def wahba_problem(n, seed, noise=0.01):
@@ -51,7 +83,7 @@ def scipy_align(a, b, w=None):
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_geodesic_matches_angle_between(dtype):
     p, q = random_quaternions(50, 1), random_quaternions(50, 2)
-    Rp, Rq = rj.quaternion_to_matrix(p), rj.quaternion_to_matrix(q)
+    Rp, Rq = np.asarray(rj.quaternion_to_matrix(p)), np.asarray(rj.quaternion_to_matrix(q))
     d = rj.geodesic_distance(Rp.astype(dtype), Rq.astype(dtype))
     assert d.dtype == dtype
     assert_close(d, rj.angle_between(p, q), atol=20 * ulp(dtype))
@@ -107,16 +139,19 @@ def test_geodesic_gradient_at_pi_is_finite():
     assert all(np.all(np.isfinite(gi)) for gi in g)
 
 
+_chordal_grad = jax.jit(jax.grad(rj.chordal_distance))
+
+
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_chordal_distance(dtype):
     p, q = random_quaternions(50, 4), random_quaternions(50, 5)
-    Rp = rj.quaternion_to_matrix(p).astype(dtype)
-    Rq = rj.quaternion_to_matrix(q).astype(dtype)
+    Rp = np.asarray(rj.quaternion_to_matrix(p)).astype(dtype)
+    Rq = np.asarray(rj.quaternion_to_matrix(q)).astype(dtype)
     d = rj.chordal_distance(Rp, Rq)
     assert d.dtype == dtype
     theta = np.asarray(rj.angle_between(p, q))
     assert_close(d, 2 * np.sqrt(2) * np.sin(theta / 2), atol=20 * ulp(dtype))
-    g = jax.jit(jax.grad(rj.chordal_distance))(Rp[0], Rp[0])
+    g = _chordal_grad(Rp[0], Rp[0])
     assert_close(g, np.zeros((3, 3)), atol=0)
 
 
@@ -185,13 +220,15 @@ def test_nined_projection_value(name):
     assert_close(np.linalg.det(R), 1.0, atol=1e-14)
 
 
-_nined_jacobian = jax.jit(jax.jacobian(rj.nined_to_matrix))
+def _nined_jacobian(x):
+    """``jax.jacobian(rj.nined_to_matrix)(x)``, by test_nined_check_grads' VJP program."""
+    return rev_jacobian(rj.nined_to_matrix, (x,))[0]
 
 
 @pytest.mark.parametrize("name", list(SPECTRA))
 def test_nined_gradient_matches_fd_including_ties(name):
     M = spectral_matrix(SPECTRA[name], 10).reshape(9)
-    J = _nined_jacobian(jnp.asarray(M))
+    J = _nined_jacobian(M)
     assert_close(J, fd_jacobian(rj.nined_to_matrix, M, h=1e-6), atol=1e-8)
 
 
@@ -223,7 +260,7 @@ def _nined_weighted_grad(x):
 def test_nined_gradient_finite_when_projection_not_unique():
     # rank 1: every rotation about one axis is equally near
     M = np.outer([1.0, 2.0, 0.5], [0.3, -1.0, 0.2]).reshape(9)
-    J = _nined_jacobian(jnp.asarray(M))
+    J = _nined_jacobian(M)
     assert np.all(np.isfinite(J)) and np.abs(J).max() > 0
 
 
@@ -255,15 +292,23 @@ def test_svd_and_q_method_agree(dtype):
     assert_same_rotation(q_svd, q_dav, atol=200 * ulp(dtype))
 
 
+def _align_vmapped(a, b, w, method):
+    """``align_vectors`` mapped over the rows by ``jax.vmap``, called eagerly as before."""
+    return jax.vmap(ALIGN[method])(a, b, w)
+
+
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("shape", BATCH_SHAPES, ids=str)
 def test_align_broadcasts_like_vmap(method, shape):
+    # the 6 rows of the largest shape; the smaller shapes take the first (one vmapped program
+    # per method, at 6 rows)
     n = int(np.prod(shape))
     rng = np.random.default_rng(15)
-    a = rng.normal(size=(n, 4, 3))
-    b = rng.normal(size=(n, 4, 3))
-    w = rng.uniform(0.5, 1.5, size=(n, 4))
-    looped = jax.vmap(lambda a, b, w: rj.align_vectors(a, b, w, method=method))(a, b, w)
+    a = rng.normal(size=(6, 4, 3))
+    b = rng.normal(size=(6, 4, 3))
+    w = rng.uniform(0.5, 1.5, size=(6, 4))
+    looped = np.asarray(_align_vmapped(a, b, w, method))[:n]
+    a, b, w = a[:n], b[:n], w[:n]
     batched = rj.align_vectors(
         a.reshape(*shape, 4, 3), b.reshape(*shape, 4, 3), w.reshape(*shape, 4), method=method
     )
@@ -286,7 +331,7 @@ def test_align_and_mean_any_number_of_vectors(n):
 def test_mean_broadcasts_shared_quaternions_against_batched_weights(n):
     q = random_quaternions(n, 42)
     w = np.random.default_rng(43).uniform(0.1, 1.0, size=(4, n))
-    batched = rj.quaternion_mean(q, w)
+    batched = np.asarray(rj.quaternion_mean(q, w))
     assert batched.shape == (4, 4)
     for k in range(4):
         assert_close(batched[k], rj.quaternion_mean(q, w[k]), atol=1e-14)
@@ -302,19 +347,27 @@ def test_sum_outer_applies_the_factors_inside_the_products(n, scale):
     from rotjax._fitting import _sum_outer
 
     rng = np.random.default_rng(44)
-    u, v = (jnp.asarray(rng.normal(size=(3, n, 4))) for _ in range(2))
-    fx = fy = ()
-    if scale != 1.0:
-        fx, fy = pow2_factors(u * scale, (-2, -1)), pow2_factors(v * scale, (-2, -1))
-        assert float(jnp.max(jnp.abs(jnp.einsum("...ni,...nj->...ij", u * scale, v * scale)))) == 0
-    got = jax.jit(lambda u, v: _sum_outer(u * scale, v * scale, fx, fy))(u, v)
-    xs, ys = (np.asarray(w * scale) for w in (u, v))
+    u, v = (rng.normal(size=(3, n, 4)) for _ in range(2))
+    factors = scale != 1.0
+
+    @jax.jit  # one program per case (eager, each operation was one)
+    def case(u, v):
+        x, y = u * scale, v * scale
+        fx = pow2_factors(x, (-2, -1)) if factors else ()
+        fy = pow2_factors(y, (-2, -1)) if factors else ()
+        naive = jnp.max(jnp.abs(jnp.einsum("...ni,...nj->...ij", x, y)))
+        return _sum_outer(x, y, fx, fy), fx, fy, naive
+
+    got, fx, fy, naive = case(u, v)
+    if factors:
+        assert float(naive) == 0
+    xs, ys = (np.asarray(w) * scale for w in (u, v))
     for f in fx:  # each factor in turn (exact; their product could overflow)
         xs = xs * np.asarray(f)[:, None, None]
     for f in fy:
         ys = ys * np.asarray(f)[:, None, None]
     want = np.einsum("...ni,...nj->...ij", xs, ys)
-    assert float(jnp.min(jnp.abs(got))) > 1e-6
+    assert float(np.min(np.abs(np.asarray(got)))) > 1e-6
     assert_close(got, want, atol=1e-14 * np.abs(want).max())
 
 
@@ -350,11 +403,18 @@ def test_align_scalar_first(method):
 @pytest.mark.parametrize("method", METHODS)
 def test_align_check_grads(method):
     a, b, w, _ = wahba_problem(6, 18, noise=0.3)
+    check_grads(ALIGN[method], (a, b, w), order=1, modes=("fwd", "rev"))
 
-    def f(a, b, w):
-        return rj.align_vectors(a, b, w, method=method)
 
-    check_grads(f, (a, b, w), order=1, modes=("fwd", "rev"))
+def _single_pair(method):
+    def f(a, b):
+        q = rj.align_vectors(a, b, method=method)
+        return q, rj.quaternion_apply(q, b[0])
+
+    return f
+
+
+_SINGLE_PAIR = {m: _single_pair(m) for m in METHODS}
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -367,17 +427,12 @@ def test_align_single_pair(method, dtype):
     """
     rng = np.random.default_rng(19)
     a, b = rng.normal(size=(1, 3)).astype(dtype), rng.normal(size=(1, 3)).astype(dtype)
-
-    def f(a, b):
-        q = rj.align_vectors(a, b, method=method)
-        return q, rj.quaternion_apply(q, b[0])
-
+    f = _SINGLE_PAIR[method]
     q, Rb = f(a, b)
     na, nb = np.linalg.norm(a.astype(np.float64)), np.linalg.norm(b.astype(np.float64))
     u = a[0].astype(np.float64) / na
     assert_close(np.asarray(Rb, np.float64) / nb, u, atol=20 * ulp(dtype))
-    jac = jax.jit(jax.jacobian(f, argnums=(0, 1)))  # one program (eager: many)
-    (Jq_a, Jq_b), (Ja, Jb) = jac(jnp.asarray(a), jnp.asarray(b))
+    (Jq_a, Jq_b), (Ja, Jb) = rev_jacobian(f, (a, b))  # one program (eager: many)
     assert all(np.all(np.isfinite(j)) for j in (Jq_a, Jq_b))
     tol = 1e-8 if dtype == np.float64 else 1e-3
     assert_close(Ja[:, 0, :], nb / na * (np.eye(3) - np.outer(u, u)), atol=tol)
@@ -394,12 +449,6 @@ NOISE_FREE_SETS = {
 }
 
 
-# one program per method and shape, shared by the sets of a shape
-@partial(jax.jit, static_argnames="method")
-def _align_jacobian(a, b, method):
-    return jax.jacobian(lambda a: rj.align_vectors(a, b, method=method))(a)
-
-
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", list(NOISE_FREE_SETS))
 def test_align_noise_free(method, name):
@@ -413,7 +462,8 @@ def test_align_noise_free(method, name):
     def f(a):
         return rj.align_vectors(a, b, method=method)
 
-    J = _align_jacobian(jnp.asarray(a), b, method)
+    # one VJP program per method and shape, shared by the sets of a shape
+    J = rev_jacobian(ALIGN[method], (a, b))[0]
     assert_close(J, fd_jacobian(f, a, h=1e-6), atol=1e-8)
 
 
@@ -478,9 +528,13 @@ def test_mean_gradients():
     q = random_quaternions(4, 28)
     w = np.array([1.0, 0.5, 2.0, 0.7])
     check_grads(rj.quaternion_mean, (q, w), order=1, modes=("fwd", "rev"))
+
+
+def test_mean_jacobian_finite_where_not_unique():
     # two rotations 180 degrees apart with equal weights: the mean is not unique
     q2 = np.array([[0.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0]])
-    J = jax.jit(jax.jacobian(rj.quaternion_mean))(jnp.asarray(q2))
+    J = rev_jacobian(rj.quaternion_mean, (q2,))[0]
+    assert J.shape == (4, 2, 4)
     assert np.all(np.isfinite(J))
 
 
@@ -525,8 +579,10 @@ def test_slerp_constant_angular_speed_and_short_way():
     assert_close(rj.angle_between(path[:-1], path[1:]), np.full(10, theta / 10), atol=1e-14)
 
 
-# one program, shared by the tests (eager differentiation dispatches many)
-_slerp_jacobian = jax.jit(jax.jacobian(rj.slerp, argnums=(0, 1, 2)))
+def _slerp_jacobian(p, q, t):
+    """``jax.jacobian(rj.slerp, argnums=(0, 1, 2))``: one VJP program, shared by the tests and
+    by test_slerp_t_broadcasts' check_grads of ``rj.slerp`` (eager: many)."""
+    return rev_jacobian(rj.slerp, (p, q, t))
 
 
 @pytest.mark.parametrize("gap", [0.0, 1e-12, 1e-7])
@@ -537,7 +593,7 @@ def test_slerp_stable_as_p_approaches_q(gap):
     theta = float(rj.angle_between(p, q))
     assert_close(rj.angle_between(p, out), 0.3 * theta, atol=1e-15)
     assert_close(rj.angle_between(out, q), 0.7 * theta, atol=1e-15)
-    Jp, Jq, _ = _slerp_jacobian(jnp.asarray(p), jnp.asarray(q), 0.3)
+    Jp, Jq, _ = _slerp_jacobian(p, q, 0.3)
     assert_close(Jp, fd_jacobian(lambda x: rj.slerp(x, q, 0.3), p), atol=1e-8)
     assert_close(Jq, fd_jacobian(lambda x: rj.slerp(p, x, 0.3), q), atol=1e-8)
 
@@ -547,7 +603,7 @@ def test_slerp_antipodal_is_constant_path():
     t = np.linspace(-0.5, 1.5, 9)
     path = rj.slerp(p, -p, t)
     assert_close(path, np.broadcast_to(p, (9, 4)), atol=1e-15)
-    J = _slerp_jacobian(jnp.asarray(p), jnp.asarray(-p), 0.4)
+    J = _slerp_jacobian(p, -p, 0.4)
     assert all(np.all(np.isfinite(j)) for j in J)
 
 
