@@ -286,6 +286,33 @@ def check_grads(f, args, order, modes=("fwd", "rev"), atol=None, rtol=None, eps=
     check((), tuple(args), order, "")
 
 
+def rev_jacobian(f, args):
+    """The Jacobians of ``f(*args)`` (each output leaf, in each argument), by reverse mode: the
+    jitted VJP of ``f`` that :func:`check_grads` keeps for ``f`` (the same program,
+    compiled once, where ``f`` is checked at these shapes too), applied to each basis cotangent
+    in turn. The numbers of ``jax.jacobian(f, argnums=range(len(args)))``, without its
+    vmapped VJP (one more program, slow to compile). Leaves ``(*out, *arg)`` per output leaf,
+    a tuple over the arguments."""
+    _, fj, _, pull = _check_programs(f, ())
+    out = fj(*args)
+    leaves, tree = jax.tree.flatten(out)
+    leaves = [np.asarray(o) for o in leaves]
+    jac = []
+    for k, o in enumerate(leaves):
+        rows = []
+        for idx in np.ndindex(o.shape):
+            ct = [np.zeros_like(x) for x in leaves]
+            ct[k][idx] = 1
+            rows.append([np.asarray(g) for g in pull(tuple(args), jax.tree.unflatten(tree, ct))])
+        jac.append(
+            tuple(
+                np.stack([r[i] for r in rows]).reshape(*o.shape, *np.shape(args[i]))
+                for i in range(len(args))
+            )
+        )
+    return jax.tree.unflatten(tree, jac)
+
+
 # --- one call of every public function ------------------------------------------------------
 
 # Functions whose input has a set or time axis before the trailing one (besides the batch).

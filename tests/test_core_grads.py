@@ -79,7 +79,6 @@ _check_grads = check_grads
 # parameters run them as they are. One point, not a batch: XLA:CPU vectorises a batch's loop,
 # and LLVM's vectorised code for a derivative program takes 2-2.5x as long to compile (the
 # values are those of the batched program, to an ulp of fused multiply-adds).
-_ROWS: dict = {}
 _EULER_OUT = {
     "matrix_to_euler": (3,),
     "quaternion_to_euler": (3,),
@@ -104,18 +103,13 @@ def _euler(name, seq, x, dx=None, ct=None):
     """``rj.<name>(x, seq)`` for the rows of ``x`` (float64), through the shared program; with
     ``dx``, also its jvp along ``dx`` and its vjp of ``ct`` (0 if not given), row by row."""
     x = np.asarray(x, np.float64)
-    n, rows = len(x), _ROWS.get(name, 1)
     values_only = dx is None
     dx = np.zeros_like(x) if values_only else np.asarray(dx, np.float64)
-    ct = np.zeros((n, *_EULER_OUT[name])) if ct is None else np.asarray(ct, np.float64)
-    parts = []
-    for i in range(0, n, rows):
-        batch = [a[i : i + rows] for a in (x, dx, ct)]
-        k = len(batch[0])
-        batch = [
-            np.concatenate([a, np.broadcast_to(a[:1], (rows - k, *a.shape[1:]))]) for a in batch
-        ]
-        parts.append([np.asarray(o)[:k] for o in _euler_derivatives(name, seq, *batch)])
+    ct = np.zeros((len(x), *_EULER_OUT[name])) if ct is None else np.asarray(ct, np.float64)
+    parts = [
+        [np.asarray(o) for o in _euler_derivatives(name, seq, *(a[i : i + 1] for a in (x, dx, ct)))]
+        for i in range(len(x))
+    ]
     out, jv, vj = (np.concatenate(p) for p in zip(*parts, strict=True))
     return out if values_only else (out, jv, vj)
 
