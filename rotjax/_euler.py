@@ -22,10 +22,11 @@ from ._numerics import (
     recorded,
     select,
     stack,
+    stack_matrix,
     to_scalar_last,
     unstack,
 )
-from ._quaternion import quat_multiply, quat_to_matrix
+from ._quaternion import quat_multiply
 from ._shepperd import entries
 
 _VALID = (
@@ -82,13 +83,58 @@ def _elementary(axis: int, angle):
 
 def _euler_to_quat(a, seq):
     axes, intrinsic = parse_seq(seq)
-    q0, q1, q2 = (_elementary(ax, a[..., n]) for n, ax in enumerate(axes))
+    q0, q1, q2 = (_elementary(ax, angle) for ax, angle in zip(axes, unstack(a), strict=True))
     # intrinsic: R = R_0 R_1 R_2 (rotating axes); extrinsic: R = R_2 R_1 R_0 (fixed axes)
     return (
         quat_multiply(quat_multiply(q0, q1), q2)
         if intrinsic
         else quat_multiply(quat_multiply(q2, q1), q0)
     )
+
+
+def _axis_matrix(axis: int, angle):
+    """Rows of the active rotation matrix by `angle` about coordinate axis `axis`, with
+    Python's `0` and `1` for its constant entries (dropped from the products below)."""
+    s, c = sin_cos(angle)
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    m = [[0, 0, 0], [0, 0, 0], [0, 0, 0]]
+    m[axis][axis] = 1
+    m[i][i], m[i][j], m[j][i], m[j][j] = c, -s, s, c
+    return m
+
+
+def _product(a, b):
+    """3x3 product of rows of entries, where Python's `0` and `1` cost nothing."""
+
+    def const(x, k):
+        return isinstance(x, int) and x == k
+
+    def mul(u, v):
+        if const(u, 0) or const(v, 0):
+            return 0
+        return v if const(u, 1) else u if const(v, 1) else u * v
+
+    def add(u, v):
+        return v if const(u, 0) else u if const(v, 0) else u + v
+
+    return [
+        [
+            add(add(mul(a[r][0], b[0][c]), mul(a[r][1], b[1][c])), mul(a[r][2], b[2][c]))
+            for c in range(3)
+        ]
+        for r in range(3)
+    ]
+
+
+def _euler_to_matrix(a, seq):
+    """The product of the three axis matrices (Nikravesh 1988, App. A: `A = D C B` for z-x-z),
+    in the order of `seq`. Written with the sines and cosines of the angles themselves, not
+    through the quaternion: each entry of a stacked result computes every entry (see
+    ``stack``), and the quaternion's products and normalisation would be repeated nine times."""
+    axes, intrinsic = parse_seq(seq)
+    m0, m1, m2 = (_axis_matrix(ax, angle) for ax, angle in zip(axes, unstack(a), strict=True))
+    R = _product(_product(m0, m1), m2) if intrinsic else _product(_product(m2, m1), m0)
+    return stack_matrix(R)
 
 
 def _lifted(u, v):
@@ -394,7 +440,7 @@ def euler_to_matrix(angles: ArrayLike, seq: str, degrees: bool = False) -> Array
         ```
     """
     a, dt = _prep_angles(angles, degrees)
-    return cast(quat_to_matrix(_euler_to_quat(a, seq)), dt)
+    return cast(_euler_to_matrix(a, seq), dt)
 
 
 @public

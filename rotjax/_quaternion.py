@@ -8,12 +8,14 @@ conjugate) do not, because kinematics needs them on non-unit quaternions.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._elementary import atan2, rsqrt
+from ._elementary import atan2, reciprocal, rsqrt
 from ._numerics import (
     as_float,
     cast,
@@ -22,6 +24,7 @@ from ._numerics import (
     from_scalar_last,
     max_abs,
     public,
+    recorded,
     stack,
     stack_matrix,
     sum_squares,
@@ -133,37 +136,44 @@ def quat_renormalize(q):
 
 def quat_to_matrix(q):
     """Rotation matrix of a scalar-last quaternion of any non-zero norm."""
-    return quat_to_matrix_parts(*unstack(q))
+    return quat_to_matrix_parts(*unstack(q), computed=recorded(q))
 
 
-def quat_to_matrix_parts(x, y, z, w):
-    """Rotation matrix of a quaternion given by its components (per-rotation arrays): the
-    entries of :func:`_matrix_entries`, stacked row by row (short expressions of the
-    quaternion: see :func:`rotjax._numerics.stack_matrix`)."""
-    e = _matrix_entries(x, y, z, w)
-    return stack_matrix([e[0:3], e[3:6], e[6:9]], concat=True)
+def quat_to_matrix_parts(x, y, z, w, computed=False):
+    """Rotation matrix of a quaternion given by its components (per-rotation arrays), stacked
+    row by row (see :func:`rotjax._numerics.stack_matrix`).
+
+    Read from memory, the components make each entry a short expression: the entries of
+    :func:`_matrix_entries`, stacked by a concatenate, which computes each in a loop branch
+    of its own. ``computed``: the components are expressions of this program (a quaternion
+    stacked in this trace, such as ``Rotation.from_euler``'s), which that branch would compute
+    again for each entry, one rotation at a time (30 times slower); the entries are then
+    stacked by a select, each computing every entry, with ``1 / |q|^2`` as
+    :func:`~rotjax._elementary.reciprocal` (a division would be a loop of its own)."""
+    e = _matrix_entries(x, y, z, w, computed)
+    return stack_matrix([e[0:3], e[3:6], e[6:9]], concat=not computed)
 
 
-@jax.custom_jvp
-def _matrix_entries(x, y, z, w):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
+def _matrix_entries(x, y, z, w, fused):
     """Rotation matrix of a quaternion given by its components (per-rotation arrays), of
     non-zero norm, squared norm a normal number: the homogeneous form, quadratic in ``q``, then
     one division by ``|q|^2`` (Markley & Crassidis 2014, Ch. 2, for any norm). An entry
     whose terms cancel is exactly zero (``z = w``: ``w^2 - z^2``), not ``1 - 2 z^2 / |q|^2``
     rounded; an entry equal to ``+-|q|^2`` is exactly ``+-1`` where ``|q|^2`` times its rounded
     reciprocal rounds to 1, as for every power-of-two norm (the prescaled unit quaternions)."""
-    return _homogeneous_matrix(x, y, z, w, lambda n2: 1 / n2)
+    return _homogeneous_matrix(x, y, z, w, reciprocal if fused else lambda n2: 1 / n2)
 
 
 @_matrix_entries.defjvp
-def _matrix_entries_jvp(primals, tangents):
+def _matrix_entries_jvp(fused, primals, tangents):
     # The derivative of the same form, with 1 / |q|^2 as rsqrt(|q|^2)^2 (the same to an ulp):
     # multiplications only, which XLA:CPU fuses into one loop in reverse mode as well (a
     # division there split the gradient into six loops).
     def form(*q):
-        return _homogeneous_matrix(*q, lambda n2: jnp.square(rsqrt(n2)))
+        return _homogeneous_matrix(*q, reciprocal if fused else lambda n2: jnp.square(rsqrt(n2)))
 
-    return _matrix_entries(*primals), jax.jvp(form, primals, tangents)[1]
+    return _matrix_entries(*primals, fused), jax.jvp(form, primals, tangents)[1]
 
 
 def _homogeneous_matrix(x, y, z, w, reciprocal):
@@ -224,7 +234,7 @@ def quaternion_to_matrix(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return cast(quat_to_matrix_parts(*_prescaled_parts(q)[0]), dt)
+    return cast(quat_to_matrix_parts(*_prescaled_parts(q)[0], computed=recorded(q)), dt)
 
 
 @public

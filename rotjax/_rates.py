@@ -44,6 +44,7 @@ from ._numerics import (
     skew,
     to_scalar_last,
     unit_scale,
+    unstack,
 )
 from ._quaternion import quat_conjugate, quat_multiply
 
@@ -116,7 +117,7 @@ def _body_rate_matrix(axes, a):
     i, j, k = axes
     m = 3 - i - j
     s = _levi_civita(i, j, m)
-    a1, a2 = a[..., 1], a[..., 2]
+    _, a1, a2 = unstack(a)
     zero = jnp.zeros_like(a1)
     one = jnp.ones_like(a1)
     u = [zero, zero, zero]
@@ -150,8 +151,9 @@ def _inverse_rates(a, omega, seq, frame, damping):
     axes, negate, reverse = _reduce(seq, frame)
     a = _rate_angles(a, negate, reverse)
     i, j, k = axes
-    h, g, m, s = _middle_terms(axes, a[..., 1])
-    v = _rotate_k_transposed(k, -a[..., 2], list(jnp.moveaxis(omega, -1, 0)))  # R_k(a2) omega
+    _, a1, a2 = unstack(a)
+    h, g, m, s = _middle_terms(axes, a1)
+    v = _rotate_k_transposed(k, -a2, unstack(omega))  # R_k(a2) omega
     # M [x0, x1, x2] = v:  Tait-Bryan  v_i = h x0,        v_k = g x0 + x2;
     #                      proper      s v_m = h x0,      v_i = g x0 + x2.
     A, B = (s * v[m], v[i]) if i == k else (v[i], v[k])
@@ -317,7 +319,7 @@ def euler_singularity(angles: ArrayLike, seq: str) -> Array:
     (a,), dt = as_float(angles)
     check_shape(a, (3,), "angles")
     axes, _ = parse_seq(seq)
-    h, _, _, _ = _middle_terms(axes, a[..., 1])
+    h, _, _, _ = _middle_terms(axes, unstack(a)[1])
     return cast(jnp.abs(h), dt)
 
 

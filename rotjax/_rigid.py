@@ -27,9 +27,11 @@ from ._numerics import (
     max_abs,
     public,
     stack,
+    stack_matrix,
     to_scalar_last,
     unit_scale,
     unstack,
+    unstack_matrix,
 )
 from ._quaternion import (
     quat_conjugate,
@@ -79,8 +81,11 @@ def _pose_from_matrix(m, normalize):
     # Rotation part: the nearest rotation (Frobenius norm), as Rotation.from_matrix; a 3x3
     # block with det <= 0 or a last row other than [0, 0, 0, 1] gives NaN (scipy raises, or
     # gives NaN for lazy arrays).
-    r = m[..., :3, :3]
-    t = m[..., :3, 3]
+    # The entries read as unstack reads (a slice's transpose in reverse mode is a pad,
+    # evaluated per element in a branch of its own).
+    e = unstack_matrix(m)
+    r = stack_matrix([e[0:3], e[4:7], e[8:11]])
+    t = stack([e[3], e[7], e[11]])
     if r.size == 0:  # an empty batch (the eigen kernel cannot reshape one)
         return jnp.zeros(r.shape[:-2] + (4,), r.dtype), t
     if not normalize:

@@ -17,13 +17,11 @@ from ._numerics import (
     eps,
     exponent_scale,
     from_scalar_last,
-    like_rank,
-    matmul,
     public,
     safe_norm,
     select,
-    skew,
     stack,
+    stack_matrix,
     to_scalar_last,
     unstack,
 )
@@ -210,13 +208,18 @@ def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
     check_shape(v, (3,), "rotvec")
     if degrees:
         v = jnp.deg2rad(v)
-    k, c = exp_coeffs(jnp.sum(v * v, axis=-1))
-    # sin(t)/t = 2 k c and (1 - cos t)/t^2 = 2 k^2, both smooth in theta^2.
-    a = (2 * k * c)[..., None, None]
-    b = (2 * k * k)[..., None, None]
-    K = skew(v)
-    eye = like_rank(jnp.eye(3, dtype=v.dtype), K)
-    return cast((eye + a * K + b * matmul(K, K)), dt)
+    x, y, z = unstack(v)
+    k, c = exp_coeffs(x * x + y * y + z * z)
+    # sin(t)/t = 2 k c and (1 - cos t)/t^2 = 2 k^2, both smooth in theta^2; with
+    # K^2 = v v^T - t^2 I, the entries of I + a K + b K^2 written out (one fused loop).
+    a, b = 2 * k * c, 2 * k * k
+    bx, by, bz = b * x, b * y, b * z
+    rows = [
+        [1 - (by * y + bz * z), bx * y - a * z, bx * z + a * y],
+        [bx * y + a * z, 1 - (bx * x + bz * z), by * z - a * x],
+        [bx * z - a * y, by * z + a * x, 1 - (bx * x + by * y)],
+    ]
+    return cast(stack_matrix(rows), dt)
 
 
 @public

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import rotjax as rj
-from rotjax._elementary import rsqrt
+from rotjax._elementary import reciprocal, rsqrt
 from rotjax._matrix import selected_column
 from rotjax._numerics import exponent_scale
 
@@ -52,6 +52,35 @@ def test_rsqrt_derivatives_and_nan(dtype):
     assert np.isnan(rsqrt(jnp.asarray(np.nan, dtype)))
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_reciprocal_is_within_one_ulp_and_exact_on_powers_of_two(dtype):
+    rng = np.random.default_rng(11)
+    lo, hi = RANGE[dtype]
+    dense = rng.uniform(1.0, 2.0, 4000)  # one period of the initial guess's error
+    wide = 10.0 ** rng.uniform(lo, -lo, 4000)  # 1 / x normal too
+    twos = 2.0 ** np.arange(-100, 101)
+    x = np.concatenate([dense, wide, twos, np.nextafter(twos, 0), np.nextafter(twos, 4)])
+    x = x.astype(dtype)
+    got = np.asarray(jax.jit(reciprocal)(jnp.asarray(x)))
+    assert got.dtype == dtype
+    with mp.workdps(40):
+        exact = [1 / mp.mpf(float(a)) for a in x]
+        ulps = [float(abs(mp.mpf(float(g)) - e)) for g, e in zip(got, exact, strict=True)]
+    spacing = np.spacing(np.asarray([float(e) for e in exact], dtype))
+    assert max(np.asarray(ulps) / spacing.astype(np.float64)) <= 1.0
+    np.testing.assert_array_equal(got[8000 : 8000 + twos.size], (1 / twos).astype(dtype))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_reciprocal_derivatives_and_nan(dtype):
+    x = jnp.asarray([0.25, 1.0, 3.0, 1e6], dtype)
+    g = jax.vmap(jax.grad(reciprocal))(x)
+    np.testing.assert_allclose(g, -1 / np.asarray(x, np.float64) ** 2, rtol=4 * np.finfo(dtype).eps)
+    h = jax.grad(jax.grad(reciprocal))(jnp.asarray(4.0, dtype))
+    np.testing.assert_allclose(h, 2 / 4.0**3, rtol=8 * np.finfo(dtype).eps)
+    assert np.isnan(reciprocal(jnp.asarray(np.nan, dtype)))
+
+
 @given(arrays(np.float64, (3, 3), elements=st.floats(-1e300, 1e300)))
 def test_selected_column_norm_is_in_rsqrt_domain_for_any_finite_matrix(R):
     """rsqrt's domain in matrix_to_quaternion: after the power-of-two prescaling the selected
@@ -82,8 +111,9 @@ def test_exponent_scale_is_exact_and_clamped(dtype):
 
 
 def test_other_backends_use_xla_operations():
-    """Lowered for a GPU (no GPU needed to lower), ``rsqrt``, ``sin_cos`` and ``atan2`` are
-    XLA's own operations; lowered for the CPU, the polynomial forms (no such operation)."""
+    """Lowered for a GPU (no GPU needed to lower), ``rsqrt``, ``reciprocal``, ``sin_cos`` and
+    ``atan2`` are XLA's own operations; lowered for the CPU, the polynomial forms (no such
+    operation)."""
     from jax import export
 
     def f(q, v):
@@ -95,3 +125,5 @@ def test_other_backends_use_xla_operations():
         text = export.export(jax.jit(f), platforms=[platform])(*args).mlir_module()
         for op in ops:
             assert (f"stablehlo.{op}" in text) == present, (platform, op)
+        text = export.export(jax.jit(reciprocal), platforms=[platform])(args[0]).mlir_module()
+        assert ("stablehlo.divide" in text) == present, (platform, "reciprocal")

@@ -1,11 +1,12 @@
 """Program structure, read off the compiled program on the backend at hand (no timing).
 
-Each conversion, and the ``jit(grad)`` of the sum of its outputs, compiles to at most the stated
-number of fused loops, reads its inputs and writes its outputs about once (``bytes accessed``
-of ``cost_analysis()`` at most ``BYTES_SLACK`` times what they hold, per rotation) and stays
-within a stated flop budget per rotation. A change that splits a loop, writes an intermediate
-array or reads the input again fails here, on any machine, however noisy. On CPU, each forward
-loop must also be vectorised (SIMD instructions in its LLVM code, read from XLA's dump).
+Each conversion, and its reverse-mode derivative (``vjp`` of a cotangent read from memory),
+compiles to at most the stated number of fused loops, reads its inputs and writes its outputs
+about once (``bytes accessed`` of ``cost_analysis()`` at most ``BYTES_SLACK`` times what they
+hold, per rotation) and stays within a stated flop budget per rotation. A change that splits a
+loop, writes an intermediate array or reads the input again fails here, on any machine, however
+noisy. On CPU, each forward loop must also be vectorised (SIMD instructions in its LLVM code,
+read from XLA's dump).
 """
 
 import os
@@ -39,7 +40,7 @@ CASES = {
         lambda q: rj.quaternion_to_euler(q, SEQ), [(4,)], (1, BYTES_SLACK, 370), (5, 2.3, 410)
     ),
     "quaternion_to_matrix": (
-        rj.quaternion_to_matrix, [(4,)], (1, BYTES_SLACK, 90), (1, BYTES_SLACK, 170)
+        rj.quaternion_to_matrix, [(4,)], (1, BYTES_SLACK, 90), (1, BYTES_SLACK, 225)
     ),
     "quaternion_to_rotvec": (
         rj.quaternion_to_rotvec, [(4,)], (1, BYTES_SLACK, 130), (1, BYTES_SLACK, 260)
@@ -51,10 +52,16 @@ CASES = {
         rj.quaternion_to_mrp, [(4,)], (1, BYTES_SLACK, 100), (1, BYTES_SLACK, 175)
     ),
     "quaternion_inverse": (
-        rj.quaternion_inverse, [(4,)], (1, BYTES_SLACK, 75), (1, BYTES_SLACK, 115)
+        rj.quaternion_inverse, [(4,)], (1, BYTES_SLACK, 75), (1, BYTES_SLACK, 145)
     ),
     "rotvec_to_quaternion": (
         rj.rotvec_to_quaternion, [(3,)], (1, BYTES_SLACK, 135), (1, BYTES_SLACK, 210)
+    ),
+    "euler_to_matrix": (
+        lambda a: rj.euler_to_matrix(a, SEQ), [(3,)], (1, BYTES_SLACK, 290), (1, BYTES_SLACK, 420)
+    ),
+    "rotvec_to_matrix": (
+        rj.rotvec_to_matrix, [(3,)], (1, BYTES_SLACK, 230), (1, BYTES_SLACK, 330)
     ),
 }  # fmt: skip
 
@@ -66,11 +73,21 @@ _FUSION = re.compile(r"^\s*(?:ROOT\s+)?\S+ = \S+ fusion\(", re.MULTILINE)
 # less compile time), which leaves that program as it is (test_llvm_level_leaves_the_program).
 _STRUCTURE_ONLY = {"xla_backend_optimization_level": 0}
 _METADATA = re.compile(r", metadata=\{[^}]*\}")
+# The source-location tables (a program loaded from the compilation cache keeps the names of
+# the test that compiled it first).
+_SOURCES = re.compile(r"^FileNames\n.*?^StackFrames\n.*?\n\n", re.DOTALL | re.MULTILINE)
+
+
+def _without_sources(text):
+    return _SOURCES.sub("", _METADATA.sub("", text))
+
+
+def _args(shapes, dtype):
+    return [jax.ShapeDtypeStruct((N, *s), dtype) for s in shapes]
 
 
 def _compiled(f, shapes, dtype, options=_STRUCTURE_ONLY):
-    args = [jax.ShapeDtypeStruct((N, *s), dtype) for s in shapes]
-    return jax.jit(f).lower(*args).compile(options)
+    return jax.jit(f).lower(*_args(shapes, dtype)).compile(options)
 
 
 def _program(f, shapes, dtype):
@@ -80,6 +97,31 @@ def _program(f, shapes, dtype):
     return len(_FUSION.findall(compiled.as_text())), cost["bytes accessed"] / N, cost["flops"] / N
 
 
+def _pullback(f, shapes, dtype):
+    """``jit(grad)`` as users meet it: the reverse-mode derivative with respect to the first
+    argument, of a cotangent read from memory (a constant one, as for the gradient of a sum,
+    XLA folds into the program, which can hide a slow derivative), and the cotangent's bytes
+    per rotation. Its arguments: the cotangent's leaves, then ``f``'s."""
+    out = jax.eval_shape(f, *_args(shapes, dtype))
+    tree = jax.tree.structure(out)
+
+    def pull(*args):
+        leaves, (x, *rest) = args[: tree.num_leaves], args[tree.num_leaves :]
+        return jax.vjp(lambda x: f(x, *rest), x)[1](jax.tree.unflatten(tree, leaves))[0]
+
+    shapes = [o.shape[1:] for o in jax.tree.leaves(out)] + list(shapes)
+    return pull, shapes, sum(o.size * o.dtype.itemsize for o in jax.tree.leaves(out)) / N
+
+
+def _pads(f, shapes, dtype):
+    """Pads in the optimised program: the reverse-mode transpose of a slice, which XLA:CPU
+    evaluates per element in a branch of its own, computing the whole expression of the slice
+    again there (Euler angles read by slices made ``vjp`` of ``from_euler().as_matrix()`` two
+    orders of magnitude slower than its forward); :func:`rotjax._numerics.unstack` reads
+    components without them."""
+    return _compiled(f, shapes, dtype).as_text().count(" pad(")
+
+
 def test_llvm_level_leaves_the_program():
     """The optimised program these tests read, with LLVM's optimisation off, is the one
     compiled by default: the same text (but for source locations), bytes and flops."""
@@ -87,7 +129,7 @@ def test_llvm_level_leaves_the_program():
     g = jax.grad(lambda *a: jnp.sum(f(*a)))
     for h in (f, g):
         a, b = (_compiled(h, [(4,), (4,), (3,)], jnp.float32, o) for o in (_STRUCTURE_ONLY, None))
-        assert _METADATA.sub("", a.as_text()) == _METADATA.sub("", b.as_text())
+        assert _without_sources(a.as_text()) == _without_sources(b.as_text())
         assert a.cost_analysis() == b.cost_analysis()
 
 
@@ -117,10 +159,12 @@ def test_forward_program_is_one_pass(name, dtype):
 def test_gradient_program_is_one_pass(name, dtype):
     f, shapes, _, budget = CASES[name]
     item = np.dtype(dtype).itemsize
-    g = jax.grad(lambda *a: jnp.sum(f(*a)))
-    # reads every argument, writes the cotangent of the first
-    io = (sum(int(np.prod(s)) for s in shapes) + int(np.prod(shapes[0]))) * item
-    _check(f"jit(grad) of {name} {np.dtype(dtype).name}", _program(g, shapes, dtype), budget, io)
+    g, g_shapes, w_bytes = _pullback(f, shapes, dtype)
+    # reads the cotangent and every argument, writes the cotangent of the first
+    io = (sum(int(np.prod(s)) for s in shapes) + int(np.prod(shapes[0]))) * item + w_bytes
+    what = f"vjp of {name} {np.dtype(dtype).name}"
+    _check(what, _program(g, g_shapes, dtype), budget, io)
+    assert _pads(g, g_shapes, dtype) == 0, f"{what}: a pad (a slice's transpose)"
 
 
 _DUMP_SCRIPT = """
@@ -129,27 +173,33 @@ import jax
 import jax.numpy as jnp
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, sys.argv[1])
-from test_program import CASES
-M = 1 << 20  # the size the benchmark runs: XLA:CPU splits and vectorises loops by size
-for name, (f, shapes, _, _) in CASES.items():
+import test_program as T
+T.N = 1 << 20  # the size the benchmark runs: XLA:CPU splits and vectorises loops by size
+for name, (f, shapes, _, _) in T.CASES.items():
     for dtype in (jnp.float32, jnp.float64):
         for mode in ("forward", "gradient"):
-            h = f if mode == "forward" else jax.grad(lambda *a, f=f: jnp.sum(f(*a)))
+            h, h_shapes = (f, shapes) if mode == "forward" else T._pullback(f, shapes, dtype)[:2]
             g = lambda *a, h=h: h(*a)
             g.__name__ = name + "__" + mode + "__" + jnp.dtype(dtype).name
-            jax.jit(g).lower(*(jax.ShapeDtypeStruct((M, *s), dtype) for s in shapes)).compile()
+            jax.jit(g).lower(*T._args(h_shapes, dtype)).compile()
 """
 
 # Loops still without full-width vector arithmetic (8 float32 or 4 float64 lanes), per program:
-# XLA:CPU writes a (3, 3) cotangent per rotation in nested scalar loops, and matrix_to_euler's
-# float32 forward computes its three atan2 in the three parts of a stack (4 lanes across the
-# parts). Exact counts: a new such loop fails, and so does one of these improving (then lower
+# XLA:CPU writes a (3, 3) cotangent per rotation in nested scalar loops, and a (3, 3) result
+# stacked by a select among its nine entries (stack_matrix) in a loop nest per rotation, also
+# scalar (a concatenate of three rows each stacked by a select is vectorised, but XLA:CPU
+# leaves it scalar where the rows share longer expressions: rotvec_to_matrix became 7x
+# slower). Exact counts: a new such loop fails, and so does one of these improving (then lower
 # it here).
 NOT_FULL_WIDTH = {
     ("matrix_to_quaternion", "gradient", "float32"): 1,
     ("matrix_to_quaternion", "gradient", "float64"): 1,
     ("matrix_to_euler", "gradient", "float32"): 1,
     ("matrix_to_euler", "gradient", "float64"): 1,
+    ("euler_to_matrix", "forward", "float32"): 1,
+    ("euler_to_matrix", "forward", "float64"): 1,
+    ("rotvec_to_matrix", "forward", "float32"): 1,
+    ("rotvec_to_matrix", "forward", "float64"): 1,
 }
 
 _ARITHMETIC = r"= (?:fadd|fsub|fmul|fdiv|fneg|fcmp \w+) (?:\w+ )*"
@@ -272,9 +322,9 @@ COMPOSED = {
 }  # fmt: skip
 
 # Cases above the common slack, with the reason. XLA:CPU materialises the inputs' components
-# (a slice each) before a fused loop it judges too large to take them in: the Euler programs
-# below are the single functions' (quaternion_to_euler's gradient, euler_to_matrix), whose
-# budgets above admit the same. And it writes each output of a program in a loop of its own
+# (a slice each) before a fused loop it judges too large to take them in: quaternion_to_euler's
+# gradient (its budget above admits the same), and from_euler's matrix through the quaternion.
+# And it writes each output of a program in a loop of its own
 # (no multi-output fusion), each reading the inputs it needs: the translation and the rotation
 # of a transform read the same matrix or quaternion. as_euler computes one atan2 per output
 # angle, of arguments selected for it; after a producer of sines and cosines (from_euler) XLA
@@ -320,11 +370,13 @@ def _io_bytes(f, shapes, dtype, grad):
 def test_composed_program_is_one_pass(name, dtype, mode):
     f, shapes = COMPOSED[name]
     grad = mode == "gradient"
-    g = jax.grad(lambda *a: sum(jnp.sum(x) for x in jax.tree.leaves(f(*a)))) if grad else f
-    _, nbytes, _ = _program(g, shapes, dtype)
-    io = _io_bytes(f, shapes, dtype, grad)
+    g, g_shapes, w_bytes = _pullback(f, shapes, dtype) if grad else (f, shapes, 0)
+    _, nbytes, _ = _program(g, g_shapes, dtype)
+    io = _io_bytes(f, shapes, dtype, grad) + w_bytes
     slack = COMPOSED_SLACK.get((name, mode), BYTES_SLACK)
     assert nbytes <= slack * io, (
         f"{mode} of {name} {np.dtype(dtype).name}: {nbytes:.1f} bytes per rotation accessed, at "
         f"most {slack} x {io:.0f} (inputs and outputs) expected"
     )
+    if grad:
+        assert _pads(g, g_shapes, dtype) == 0, f"vjp of {name}: a pad (a slice's transpose)"

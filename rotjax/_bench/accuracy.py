@@ -28,7 +28,10 @@ def quats(rng, n):
 
 def mp_quat_to_matrix(q):
     mp = mpmath40()
-    x, y, z, w = (mp.mpf(float(c)) for c in q)
+    return _mp_matrix(*(mp.mpf(float(c)) for c in q))
+
+
+def _mp_matrix(x, y, z, w):
     s = 2 / (x * x + y * y + z * z + w * w)
     return [
         [1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
@@ -425,6 +428,57 @@ def rotvec_to_quaternion_errors(ev):
             k_ = mp_.sin(t / 2) / t if t != 0 else mp_.mpf(0.5)
             ref.append([float(k_ * c) for c in r] + [float(mp_.cos(t / 2))])
         errs[k] = quat_err(got, np.array(ref))
+    return errs
+
+
+def rotvec_to_matrix_errors(ev):
+    """Componentwise, against the matrix of the (rounded) rotation vector."""
+    import numpy as np
+
+    mp_ = mpmath40()
+    acc, errs = ev.acc, {}
+    vs = {
+        k: as_dtype(np.array([rotvec_of(q) for q in acc.qsets[k]]), acc.dtype) for k in BASIC_SETS
+    }
+    for k, got in ev.run_sets(vs).items():
+        ref = []
+        for r in vs[k]:
+            r = [mp_.mpf(float(c)) for c in r]
+            t = mp_.sqrt(sum(c * c for c in r))
+            k_ = mp_.sin(t / 2) / t if t != 0 else mp_.mpf(0.5)
+            m = _mp_matrix(*(k_ * c for c in r), mp_.cos(t / 2))
+            ref.append([[float(c) for c in row] for row in m])
+        errs[k] = np.abs(got - np.array(ref)).reshape(len(ref), -1).max(-1)
+    return errs
+
+
+def euler_angles_of(q, seq):
+    """Float64 Euler angles of unit quaternions (scipy, for inputs only)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_quat(q).as_euler(seq)
+
+
+def euler_to_matrix_errors(ev, seq):
+    """Componentwise, against the product of the axis rotations of the (rounded) angles."""
+    import numpy as np
+
+    mp_ = mpmath40()
+    acc, errs = ev.acc, {}
+    sets = {k: as_dtype(euler_angles_of(acc.qsets[k], seq), acc.dtype) for k in BASIC_SETS}
+    axes = ["xyz".index(c) for c in seq.lower()]
+    for k, got in ev.run_sets(sets).items():
+        ref = []
+        for a in sets[k]:
+            m = mp_.eye(3)
+            for ax, angle in zip(axes, a, strict=True):
+                c, s = mp_.cos(mp_.mpf(float(angle))), mp_.sin(mp_.mpf(float(angle)))
+                e = mp_.eye(3)
+                i, j = (ax + 1) % 3, (ax + 2) % 3
+                e[i, i], e[i, j], e[j, i], e[j, j] = c, -s, s, c
+                m = m * e if seq.isupper() else e * m  # intrinsic: R0 R1 R2; extrinsic: R2 R1 R0
+            ref.append([[float(m[r, c]) for c in range(3)] for r in range(3)])
+        errs[k] = np.abs(got - np.array(ref)).reshape(len(ref), -1).max(-1)
     return errs
 
 

@@ -93,6 +93,7 @@ INPUTS = {
         -1, 9
     ),
     "rotvec": lambda rng, q: 0.7 * rng.normal(size=(len(q), 3)),
+    "euler": lambda rng, q: A.euler_angles_of(q, SEQ),
     "quaternion_omega": _omega,
     # as a caller of quaternion_apply(q, v) holds them: two arrays (slices of one would be
     # copied before the call, and their cotangents padded back)
@@ -204,6 +205,34 @@ def jaxlie_builder(peers, build: str):
 
     fn = getattr(peers["jaxlie"].SO3, build)
     return [Contender("jaxlie", "", lambda x: jnp.roll(jax.vmap(fn)(x).wxyz, -1, -1), True)]
+
+
+def _jaxlie_exp_matrix(peers):
+    """jaxlie's ``SO3.exp(v).as_matrix()`` per rotation."""
+    if "jaxlie" not in peers:
+        return []
+    import jax
+
+    SO3 = peers["jaxlie"].SO3
+    return [Contender("jaxlie", "", jax.vmap(lambda v: SO3.exp(v).as_matrix()), True)]
+
+
+def _jaxlie_rpy_matrix(peers):
+    """jaxlie's ``SO3.from_rpy_radians(roll, pitch, yaw).as_matrix()`` per rotation (the
+    extrinsic "xyz" angles)."""
+    if "jaxlie" not in peers:
+        return []
+    import jax
+
+    SO3 = peers["jaxlie"].SO3
+    fn = jax.vmap(lambda a: SO3.from_rpy_radians(a[0], a[1], a[2]).as_matrix())
+    return [Contender("jaxlie", "", fn, True)]
+
+
+def _rotation_euler_matrix(x):
+    from .. import Rotation
+
+    return Rotation.from_euler(SEQ, x).as_matrix()
 
 
 def rotation_class(build: str, read: str, *args):
@@ -408,6 +437,32 @@ CASES = {
             ),
             A.rotvec_to_quaternion_errors,
             jaxlie=_jaxlie_native(lambda SO3, v: SO3.exp(v).wxyz, _same),
+        ),
+        Case(
+            "rotvec_to_matrix",
+            "rotvec",
+            lambda p: ordered(
+                [rotjax_fn("rotvec_to_matrix")],
+                [rotation_class("from_rotvec", "as_matrix")],
+                scipy_like(p, "from_rotvec", "as_matrix"),
+                _jaxlie_exp_matrix(p),
+            ),
+            A.rotvec_to_matrix_errors,
+            jaxlie=_jaxlie_native(lambda SO3, v: SO3.exp(v).as_matrix(), _same),
+        ),
+        Case(
+            "euler_to_matrix",
+            "euler",
+            lambda p: ordered(
+                [rotjax_fn("euler_to_matrix", "", SEQ)],
+                [Contender("rotjax", "Rotation", _rotation_euler_matrix, True)],
+                _scipy_peers(p, lambda name, R, x: R.from_euler(SEQ, x).as_matrix()),
+                _jaxlie_rpy_matrix(p),
+            ),
+            lambda ev: A.euler_to_matrix_errors(ev, SEQ),
+            jaxlie=_jaxlie_native(
+                lambda SO3, a: SO3.from_rpy_radians(a[0], a[1], a[2]).as_matrix(), _same
+            ),
         ),
         Case(
             "quaternion_apply",
