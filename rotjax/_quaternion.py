@@ -381,32 +381,11 @@ def _apply(q, v):
     return stack(_apply_parts(tuple(unstack(q)), tuple(unstack(v))))
 
 
-@jax.custom_jvp
 def _apply_parts(q, v):
     p, _ = _prescale(q)
     r = rsqrt(sum_squares(p))  # the unit quaternion, on per-rotation scalars
     d = quat_turn([x * r for x in p], v)
     return tuple(a + b for a, b in zip(v, d, strict=True))
-
-
-@_apply_parts.defjvp
-def _apply_parts_jvp(primals, tangents):
-    # JAX's derivative of the code above, grouped. With p the prescaled quaternion (s a
-    # constant power of two), r = 1 / |p| and T = quat_turn (T(u, v) = r^2 T(p, v) for u = r p):
-    # d out = dv + r^2 T(p, dv) + r^2 s T'(p, v)[dq] - 2 r^4 s (p . dq) T(p, v),
-    # T' the derivative in p (linear in both), T'(p, v)[p] = 2 T(p, v): every component a
-    # per-rotation expression, r computed once. JAX's own derivative of the code repeats the
-    # chain per use: jit(grad) of quaternion_apply(euler_to_quaternion(e), v), float64, ran
-    # at 18 us a rotation (XLA:CPU's fused loop computed shared expressions once per use).
-    (q, v), (d, e) = primals, tangents
-    p, s = _prescale(q)
-    r2 = rsqrt(sum_squares(p)) ** 2
-    by_v = quat_turn(p, e)  # T(p, dv): linear in dv
-    by_q = jax.jvp(lambda u: quat_turn(u, v), (p,), (list(d),))[1]  # T'(p, v)[dq]
-    m = (2 * s) * (r2 * r2) * sum(x * dx for x, dx in zip(p, d, strict=True))
-    turn = quat_turn(p, v)
-    out = tuple(e[a] + r2 * by_v[a] + (r2 * s) * by_q[a] - m * turn[a] for a in range(3))
-    return _apply_parts(q, v), out
 
 
 @public

@@ -21,11 +21,10 @@ from ._numerics import (
     safe_norm,
     select,
     stack,
-    stack_matrix,
     to_scalar_last,
     unstack,
 )
-from ._quaternion import quat_angle, quat_prescaled, scaled_vector_part
+from ._quaternion import quat_angle, quat_prescaled, quat_to_matrix, scaled_vector_part
 
 
 def _small(x2):
@@ -191,8 +190,9 @@ def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
             `K = hat(rotvec)`.
 
     Note:
-        `(1 - cos t)` is evaluated as `2 sin^2(t/2)` (no cancellation), and both coefficients
-        have Taylor branches at 0, so values and gradients are exact at the zero vector.
+        Computed as the matrix of the unit quaternion `(sin(t/2) v / t, cos(t/2))`: no
+        cancellation in `1 - cos t`, and the quaternion's coefficients have Taylor branches at
+        0, so values and gradients are exact at the zero vector.
 
     Examples:
         ```python
@@ -208,18 +208,7 @@ def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
     check_shape(v, (3,), "rotvec")
     if degrees:
         v = jnp.deg2rad(v)
-    x, y, z = unstack(v)
-    k, c = exp_coeffs(x * x + y * y + z * z)
-    # sin(t)/t = 2 k c and (1 - cos t)/t^2 = 2 k^2, both smooth in theta^2; with
-    # K^2 = v v^T - t^2 I, the entries of I + a K + b K^2 written out (one fused loop).
-    a, b = 2 * k * c, 2 * k * k
-    bx, by, bz = b * x, b * y, b * z
-    rows = [
-        [1 - (by * y + bz * z), bx * y - a * z, bx * z + a * y],
-        [bx * y + a * z, 1 - (bx * x + bz * z), by * z - a * x],
-        [bx * z - a * y, by * z + a * x, 1 - (bx * x + by * y)],
-    ]
-    return cast(stack_matrix(rows), dt)
+    return cast(quat_to_matrix(rotvec_to_quat(v)), dt)
 
 
 @public

@@ -492,61 +492,6 @@ def test_euler_to_matrix_grads_at_lock(seq):
         _check_grads_euler("euler_to_quaternion", seq, a)
 
 
-def test_apply_hand_written_derivative_equals_autodiff_of_its_formula():
-    """quaternion_apply's custom jvp (its transpose, and second derivatives) equals JAX's own
-    derivative of the forward code: quaternions of norms 1e-20 to 1e20, 180 degrees, the
-    identity, one quaternion broadcast against many vectors, both dtypes; NaN where q is zero
-    or not finite, as JAX's."""
-    from rotjax._quaternion import _apply, _apply_parts
-
-    ref = undecorated(_apply_parts)
-
-    rng = np.random.default_rng(31)
-    special = [[0, 0, 0, 1.0], [1.0, 0, 0, 0], [0, 0.6, 0.8, 0], [1e-9, 0, 0, -1]]
-    q = np.concatenate([special, rng.normal(size=(28, 4))])
-    q = q * np.exp(rng.uniform(-46, 46, size=(len(q), 1)))
-    v = rng.normal(size=(len(q), 3))
-    jit = jax.jit
-
-    def rel(a, b):  # error relative to the largest component of the reference, per row
-        return np.abs(np.asarray(a - b)) / (1e-300 + np.abs(np.asarray(b)).max(-1, keepdims=True))
-
-    for dtype, tol in ((jnp.float64, 1e-14), (jnp.float32, 3e-6)):
-        qd, vd = jnp.asarray(q, dtype), jnp.asarray(v, dtype)
-        dq = jnp.asarray(
-            rng.normal(size=q.shape) / np.linalg.norm(q, axis=-1, keepdims=True), dtype
-        )
-        dv = jnp.asarray(rng.normal(size=v.shape), dtype)
-        out, jv = jit(lambda a, b, s, t: jax.jvp(_apply, (a, b), (s, t)))(qd, vd, dq, dv)
-        out_ref, jv_ref = jit(lambda a, b, s, t: jax.jvp(ref, (a, b), (s, t)))(qd, vd, dq, dv)
-        np.testing.assert_array_equal(out, out_ref)
-        assert jv.dtype == dtype and rel(jv, jv_ref).max() < tol
-        ct = jnp.asarray(rng.normal(size=out.shape), dtype)
-        grad, grad_ref = (
-            jit(jax.grad(lambda a, b, c, fn=fn: jnp.sum(c * fn(a, b)), (0, 1)))
-            for fn in (_apply, ref)
-        )
-        for qq in (qd, qd[:1]):  # one quaternion broadcast against every vector
-            g, g_ref = grad(qq, vd, ct), grad_ref(qq, vd, ct)
-            for x, x_ref in zip(g, g_ref, strict=True):
-                assert x.shape == x_ref.shape and np.all(np.isfinite(np.asarray(x)))
-                assert rel(x, x_ref).max() < tol * (10 if qq.shape[0] == 1 else 1)
-        # no rotation (zero or not finite q, in the first rows): NaN derivative, as JAX's
-        bad = jnp.asarray([[0.0, 0, 0, 0], [np.inf, 0, 0, 1], [np.nan, 0, 0, 1]], dtype)
-        qb, ones = qd.at[:3].set(bad), jnp.ones_like(vd)
-        g, g_ref = grad(qb, ones, jnp.ones_like(ct))[0], grad_ref(qb, ones, jnp.ones_like(ct))[0]
-        np.testing.assert_array_equal(np.isnan(g), np.isnan(g_ref))
-        assert np.all(np.isnan(g[:3])) and not np.any(np.isnan(g[3:]))
-    hess, hess_ref = (jit(jax.hessian(fn, (0, 1))) for fn in (_apply, ref))
-    for i in (0, 1, 5):
-        h, h_ref = (
-            hess(jnp.asarray(q[i]), jnp.asarray(v[i])),
-            hess_ref(jnp.asarray(q[i]), jnp.asarray(v[i])),
-        )
-        for x, x_ref in zip(jax.tree.leaves(h), jax.tree.leaves(h_ref), strict=True):
-            assert_close(x, x_ref, atol=1e-13 * (1 + float(jnp.abs(x_ref).max())))
-
-
 def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
     """rotvec_to_quaternion's custom jvp (and its transpose, and second derivatives) equals
     JAX's own derivative of the forward code: the zero vector, the Taylor branch and its edge,

@@ -61,7 +61,7 @@ CASES = {
         lambda a: rj.euler_to_matrix(a, SEQ), [(3,)], (1, BYTES_SLACK, 290), (1, BYTES_SLACK, 420)
     ),
     "rotvec_to_matrix": (
-        rj.rotvec_to_matrix, [(3,)], (1, BYTES_SLACK, 230), (1, BYTES_SLACK, 330)
+        rj.rotvec_to_matrix, [(3,)], (1, BYTES_SLACK, 270), (1, BYTES_SLACK, 360)
     ),
 }  # fmt: skip
 
