@@ -14,9 +14,11 @@ from rotjax._elementary import reciprocal, rsqrt
 from rotjax._matrix import selected_column
 from rotjax._numerics import exponent_scale
 
-# Exponent ranges of normal numbers, and the documented accuracy of rsqrt.
+# Exponent ranges of normal numbers, and the documented accuracy of rsqrt: the Newton form's on
+# the CPU, XLA's rsqrt elsewhere (a GPU's float32 rsqrt is within 2 ulp, CUDA's rsqrtf).
 RANGE = {np.float32: (-37.5, 38.0), np.float64: (-307.5, 308.0)}
 RSQRT_BOUND_EPS = 0.63
+RSQRT_BOUND_EPS_XLA_FLOAT32 = 2.0
 
 
 def _rsqrt_arguments(dtype, n, seed):
@@ -38,7 +40,9 @@ def test_rsqrt_is_within_its_documented_bound(dtype):
             for g, a in zip(got, x, strict=True)
         ]
     eps = float(np.finfo(dtype).eps)
-    assert max(err) / eps <= RSQRT_BOUND_EPS, max(err) / eps
+    xla_float32 = jax.default_backend() != "cpu" and dtype == np.float32
+    bound = RSQRT_BOUND_EPS_XLA_FLOAT32 if xla_float32 else RSQRT_BOUND_EPS
+    assert max(err) / eps <= bound, max(err) / eps
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
