@@ -411,44 +411,46 @@ def quaternion_to_rotvec_errors(ev):
     return errs
 
 
+def _rotvec_sets(acc):
+    """The rotation vectors of the basic sets, rounded to the dtype, and their exact (40-digit)
+    scalar-last quaternions."""
+    import numpy as np
+
+    mp_ = mpmath40()
+    vs = {
+        k: as_dtype(np.array([rotvec_of(q) for q in acc.qsets[k]]), acc.dtype) for k in BASIC_SETS
+    }
+    exact = {}
+    for k, v in vs.items():
+        exact[k] = []
+        for r in v:
+            r = [mp_.mpf(float(c)) for c in r]
+            t = mp_.sqrt(sum(c * c for c in r))
+            k_ = mp_.sin(t / 2) / t if t != 0 else mp_.mpf(0.5)
+            exact[k].append([k_ * c for c in r] + [mp_.cos(t / 2)])
+    return vs, exact
+
+
 def rotvec_to_quaternion_errors(ev):
     """Componentwise, up to sign, against the quaternion of the (rounded) rotation vector."""
     import numpy as np
 
-    mp_ = mpmath40()
-    acc, errs = ev.acc, {}
-    vs = {
-        k: as_dtype(np.array([rotvec_of(q) for q in acc.qsets[k]]), acc.dtype) for k in BASIC_SETS
+    vs, exact = _rotvec_sets(ev.acc)
+    return {
+        k: quat_err(got, np.array([[float(c) for c in q] for q in exact[k]]))
+        for k, got in ev.run_sets(vs).items()
     }
-    for k, got in ev.run_sets(vs).items():
-        ref = []
-        for r in vs[k]:
-            r = [mp_.mpf(float(c)) for c in r]
-            t = mp_.sqrt(sum(c * c for c in r))
-            k_ = mp_.sin(t / 2) / t if t != 0 else mp_.mpf(0.5)
-            ref.append([float(k_ * c) for c in r] + [float(mp_.cos(t / 2))])
-        errs[k] = quat_err(got, np.array(ref))
-    return errs
 
 
 def rotvec_to_matrix_errors(ev):
     """Componentwise, against the matrix of the (rounded) rotation vector."""
     import numpy as np
 
-    mp_ = mpmath40()
-    acc, errs = ev.acc, {}
-    vs = {
-        k: as_dtype(np.array([rotvec_of(q) for q in acc.qsets[k]]), acc.dtype) for k in BASIC_SETS
-    }
+    vs, exact = _rotvec_sets(ev.acc)
+    errs = {}
     for k, got in ev.run_sets(vs).items():
-        ref = []
-        for r in vs[k]:
-            r = [mp_.mpf(float(c)) for c in r]
-            t = mp_.sqrt(sum(c * c for c in r))
-            k_ = mp_.sin(t / 2) / t if t != 0 else mp_.mpf(0.5)
-            m = _mp_matrix(*(k_ * c for c in r), mp_.cos(t / 2))
-            ref.append([[float(c) for c in row] for row in m])
-        errs[k] = np.abs(got - np.array(ref)).reshape(len(ref), -1).max(-1)
+        ref = np.array([[[float(c) for c in row] for row in _mp_matrix(*q)] for q in exact[k]])
+        errs[k] = np.abs(got - ref).reshape(len(ref), -1).max(-1)
     return errs
 
 
