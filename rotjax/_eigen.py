@@ -30,7 +30,19 @@ import jax
 import jax.numpy as jnp
 
 from ._elementary import rsqrt, rsqrt_shared
-from ._numerics import TIE_ULPS, eps, exponent_scale, max_abs, safe_div, select
+from ._numerics import (
+    TIE_ULPS,
+    eps,
+    exponent_scale,
+    max_abs,
+    safe_div,
+    select,
+    stack,
+    stack_matrix,
+    tangent_entries,
+    unstack,
+    unstack_matrix,
+)
 from ._quaternion import quat_multiply, quat_to_matrix
 from ._shepperd import k4_columns, masks_once, select_column
 
@@ -245,20 +257,23 @@ def _k_to_b(K):
     """The `(..., 3, 3)` `B` with `davenport_k(B) = K - (tr K / 4) I` for the symmetric
     part of `(..., 4, 4)` `K` (the inverse of `davenport_k` on traceless matrices)."""
 
-    def k(i, j):
-        return 0.5 * K[..., i, j] + 0.5 * K[..., j, i]
+    e = unstack_matrix(K)  # a slice's transpose is a pad
 
-    t = 0.25 * (K[..., 0, 0] + K[..., 1, 1]) + 0.25 * (K[..., 2, 2] + K[..., 3, 3])
-    diag = [0.5 * K[..., i, i] + 0.5 * K[..., 3, 3] - t for i in range(3)]
+    def k(i, j):
+        return 0.5 * e[4 * i + j] + 0.5 * e[4 * j + i]
+
+    t = 0.25 * (e[0] + e[5]) + 0.25 * (e[10] + e[15])
+    diag = [0.5 * e[5 * i] + 0.5 * e[15] - t for i in range(3)]
     # davenport_k: K[i, j] = b_ij + b_ji (i, j < 3), K[:3, 3] = (b21 - b12, b02 - b20, b10 - b01)
     s01, s02, s12 = 0.5 * k(0, 1), 0.5 * k(0, 2), 0.5 * k(1, 2)
     a21, a02, a10 = 0.5 * k(0, 3), 0.5 * k(1, 3), 0.5 * k(2, 3)
-    rows = (
-        (diag[0], s01 - a10, s02 + a02),
-        (s01 + a10, diag[1], s12 - a21),
-        (s02 - a02, s12 + a21, diag[2]),
+    return stack_matrix(
+        (
+            (diag[0], s01 - a10, s02 + a02),
+            (s01 + a10, diag[1], s12 - a21),
+            (s02 - a02, s12 + a21, diag[2]),
+        )
     )
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 def _check(K):
@@ -345,22 +360,27 @@ def _top_jvp(primals, tangents):
     V, s = aux
     Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor
     v = _top(B, qe, aux)
-    Q = quat_to_matrix(v)
+    # Entries read by unstack (a slice's transpose is a pad, which XLA:CPU evaluates per
+    # element in a branch of its own: minutes to compile at second order)
+    q_e, b_e, v_e = (unstack_matrix(X) for X in (quat_to_matrix(v), Bs, V))
+    db_e = tangent_entries(dBs)
 
-    def qt(X, i, j):
-        """`(Q^T X)_ij` as a sum of per-element terms: XLA:CPU compiles a reduction over a
-        small trailing axis (`jnp.sum`, `einsum`) to a slow kernel of its own."""
-        return sum(Q[..., k, i] * X[..., k, j] for k in range(3))
+    def qt(x, i, j):
+        """`(Q^T X)_ij` from the entries `x` of `X` as a sum of per-element terms: XLA:CPU
+        compiles a reduction over a small trailing axis (`jnp.sum`, `einsum`) to a slow kernel
+        of its own."""
+        return sum(q_e[3 * k + i] * x[3 * k + j] for k in range(3))
 
-    H = [[qt(Bs, i, j) for j in range(3)] for i in range(3)]
+    H = [[qt(b_e, i, j) for j in range(3)] for i in range(3)]
     tr = H[0][0] + H[1][1] + H[2][2]
-    r = [qt(dBs, j, k) - qt(dBs, k, j) for j, k in ((2, 1), (0, 2), (1, 0))]  # vee(Q^T dB - dB^T Q)
-    s0, s1, s2 = (s[..., i] for i in range(3))
+    # vee(Q^T dB - dB^T Q)
+    r = [qt(db_e, j, k) - qt(db_e, k, j) for j, k in ((2, 1), (0, 2), (1, 0))]
+    s0, s1, s2 = unstack(s)
     top = s0 + s1 + s2
     gaps = [s1 + s2, s0 + s2, s0 + s1]
     tol = 0.5 * TIE_ULPS * eps(B.dtype) * max_abs(top, *(top - 2.0 * g for g in gaps))
     inv_g = [safe_div(1.0, g, tol) for g in gaps]
-    v_cols = [[V[..., i, j] for i in range(3)] for j in range(3)]
+    v_cols = [[v_e[3 * i + j] for i in range(3)] for j in range(3)]
 
     def Y(x):
         c = [inv_g[j] * _dot3(v_cols[j], x) for j in range(3)]
@@ -373,7 +393,7 @@ def _top_jvp(primals, tangents):
 
     y = Y(r)
     half_w = [y[i] - 0.5 * z for i, z in enumerate(Y(A(y)))]  # (2 y - Y A y) / 2
-    dv = quat_multiply(v, jnp.stack([*half_w, jnp.zeros_like(tr)], axis=-1))
+    dv = quat_multiply(v, stack([*half_w, jnp.zeros_like(tr)]))
     return v, dv  # v, not the constant q: its derivative is the next order's
 
 
@@ -386,17 +406,19 @@ def davenport_k(B):
     matrix it is the quaternion of the rotation nearest to `B` in the Frobenius norm, since
     `||R - B||^2 = 3 + ||B||^2 - 2 tr(R^T B)` (Bar-Itzhack 2000).
     """
-    b = [[B[..., i, j] for j in range(3)] for i in range(3)]
+    e = unstack_matrix(B)
+    b = [e[3 * i : 3 * i + 3] for i in range(3)]
     tr = b[0][0] + b[1][1] + b[2][2]
     sxy, sxz, syz = b[0][1] + b[1][0], b[0][2] + b[2][0], b[1][2] + b[2][1]
     ax, ay, az = b[2][1] - b[1][2], b[0][2] - b[2][0], b[1][0] - b[0][1]
-    rows = (
-        (2 * b[0][0] - tr, sxy, sxz, ax),
-        (sxy, 2 * b[1][1] - tr, syz, ay),
-        (sxz, syz, 2 * b[2][2] - tr, az),
-        (ax, ay, az, tr),
+    return stack_matrix(
+        (
+            (2 * b[0][0] - tr, sxy, sxz, ax),
+            (sxy, 2 * b[1][1] - tr, syz, ay),
+            (sxz, syz, 2 * b[2][2] - tr, az),
+            (ax, ay, az, tr),
+        )
     )
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 def nearest_quaternion(B):

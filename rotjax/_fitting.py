@@ -36,7 +36,9 @@ from ._numerics import (
     matmul,
     public,
     safe_norm,
+    stack_matrix,
     to_scalar_last,
+    unstack_matrix,
 )
 from ._quaternion import quat_conjugate, quat_multiply, quat_normalize
 from ._rotvec import quat_to_rotvec, rotvec_to_quat
@@ -68,7 +70,11 @@ def _sum_outer(x, y, fx, fy):
     if not _unrolled(x, y):
         return _einsum_outer(*_scaled_operands(x, y, fx, fy))
     xs, ys = _scaled_operands(*_broadcast_batch(x, y, fx, fy))
-    return sum(xs[..., k, :, None] * ys[..., k, None, :] for k in range(xs.shape[-2]))
+    n, p, r = xs.shape[-2], xs.shape[-1], ys.shape[-1]
+    xe, ye = unstack_matrix(xs), unstack_matrix(ys)  # a slice's transpose is a pad
+    return stack_matrix(
+        [[sum(xe[k * p + i] * ye[k * r + j] for k in range(n)) for j in range(r)] for i in range(p)]
+    )
 
 
 def _unrolled(x, y):

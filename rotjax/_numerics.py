@@ -164,29 +164,37 @@ def sum_squares(xs):
 # whole chain into one loop whatever the layout of the intermediate results (XLA does not see
 # through a stacked array read back by slices: it writes it out, or recomputes it per slice).
 # unstack(stack(parts)) == parts exactly, so values and derivatives are those of the code.
-_PARTS: dict[int, tuple[weakref.ref, tuple]] = {}
+_PARTS: dict[int, tuple[weakref.ref, tuple, bool]] = {}
 
 
-def _note(out, parts) -> None:
+def _note(out, parts, matrix=False) -> None:
     if isinstance(out, jax.core.Tracer):
         key = id(out)
-        _PARTS[key] = (weakref.ref(out, lambda _, key=key: _PARTS.pop(key, None)), tuple(parts))
+        ref = weakref.ref(out, lambda _, key=key: _PARTS.pop(key, None))
+        _PARTS[key] = (ref, tuple(parts), matrix)
+
+
+def _parts(x, matrix):
+    """The parts that :func:`stack` (or, ``matrix``, :func:`stack_matrix`) recorded for ``x``
+    in this trace, or None."""
+    hit = _PARTS.get(id(x))
+    if hit is not None and hit[0]() is x and hit[2] == matrix:
+        return list(hit[1])
+    return None
 
 
 def recorded(x) -> bool:
     """Whether ``x`` is a result of :func:`stack` in this trace (whose parts :func:`unstack`
     returns)."""
-    hit = _PARTS.get(id(x))
-    return hit is not None and hit[0]() is x
+    return _parts(x, False) is not None
 
 
 def unstack(x):
     """The components of ``x`` along its last axis, as per-rotation arrays: the one way rotjax
     reads a stacked array. For an array that :func:`stack` returned in the same trace, the parts
     it was given; else slices."""
-    if recorded(x):
-        return list(_PARTS[id(x)][1])
-    return list(_read(x))
+    parts = _parts(x, False)
+    return parts if parts is not None else list(_read(x))
 
 
 @jax.custom_jvp
@@ -259,17 +267,26 @@ def stack_matrix(rows, concat=False):
     else:
         flat = stack(entries)
         out = flat.reshape(*flat.shape[:-1], len(rows), len(rows[0]))
-    _note(out, entries)
+    _note(out, entries, matrix=True)
     return out
 
 
 def unstack_matrix(R):
     """The entries of a ``(..., m, n)`` matrix, row by row, as per-rotation arrays (see
     :func:`unstack`)."""
-    hit = _PARTS.get(id(R))
-    if hit is not None and hit[0]() is R:
-        return list(hit[1])
-    return list(_read(R.reshape(*R.shape[:-2], R.shape[-2] * R.shape[-1])))
+    parts = _parts(R, True)
+    return parts if parts is not None else list(_read(_flat(R)))
+
+
+def tangent_entries(x):
+    """The entries of a tangent ``(..., m, n)`` inside a hand-written derivative rule, row by
+    row, as per-rotation arrays (:func:`_components`: in reverse mode the transpose of
+    :func:`unstack_matrix`'s slices, applied to a tangent there, is a pad per entry)."""
+    return _components(_flat(x))
+
+
+def _flat(R):
+    return R.reshape(*R.shape[:-2], R.shape[-2] * R.shape[-1])
 
 
 def _components(x):

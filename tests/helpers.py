@@ -187,6 +187,34 @@ def hessian_rows(f, x, *rows):
     return value, jac_fwd, jac_rev, hess
 
 
+def check_hessian(f, x, h=1e-5, atol=1e-5, rtol=1e-5):
+    """The first and second derivatives of a batch-native ``f`` (returning one array; its rows
+    independent) at each row of the float64 ``x``, against central differences of step ``h``,
+    from one jitted program (:func:`hessian_rows` at the rows and at each row moved by ``+-h``
+    along each basis direction): the forward and the reverse Jacobian against differences of
+    ``f``, and the Hessian (forward over reverse) against differences of the reverse Jacobian.
+    The checks of ``check_grads(f, (x,), order=2)`` along every basis direction instead of a
+    random one, at a fraction of its compile time (one program, where it compiles seven, each
+    holding ``f`` again). Returns the Hessians, ``(n, *out, *row_shape, *row_shape)``."""
+    x = np.asarray(x, np.float64)
+    n, inner = x.shape[0], x.shape[1:]
+    d = int(np.prod(inner))
+    step = h * np.eye(d).reshape(1, d, *inner)
+    moved = [(x[:, None] + sign * step).reshape(n * d, *inner) for sign in (1.0, -1.0)]
+    value, jac_fwd, jac_rev, hess = hessian_rows(f, np.concatenate([x, *moved]))
+
+    def central(y):  # (n, *out, *row_shape): differences along the basis directions, last
+        up, down = (y[n + k * n * d : n + (k + 1) * n * d] for k in (0, 1))
+        diff = ((up - down) / (2 * h)).reshape(n, d, *y.shape[1:])
+        return np.moveaxis(diff, 1, -1).reshape(n, *y.shape[1:], *inner)
+
+    close = partial(np.testing.assert_allclose, atol=atol, rtol=rtol)
+    close(jac_fwd[:n], central(value), err_msg="forward Jacobian against differences")
+    close(jac_rev[:n], jac_fwd[:n], err_msg="reverse Jacobian against the forward one")
+    close(hess[:n], central(jac_rev), err_msg="Hessian against differences of the Jacobian")
+    return hess[:n]
+
+
 def forward_hessian_rows(f, x, *rows):
     """For a batch-native ``f`` returning one array: its Jacobian and its forward-over-forward
     second derivative (in ``x`` only) at each row, as ``jax.vmap`` of ``jax.jacfwd(f)`` and

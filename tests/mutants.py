@@ -23,6 +23,9 @@ The mutants, each an error a change could plausibly introduce:
   quaternion, not by the unit one: right only for unit quaternions).
 * ``adjoint``: a wrong adjoint block (``se3_adjoint``'s bottom-left ``R hat(t)`` instead of
   ``hat(t) R``).
+* ``eigen_gap``: a factor of 2 in the eigen kernel's derivative rule (the gaps' reciprocals
+  ``1 / g`` become ``1 / (2 g)``: the nearest rotation's, the mean's and Wahba's derivatives
+  halved).
 """
 
 from __future__ import annotations
@@ -62,6 +65,12 @@ MUTANTS = {
         "rotjax/_se3.py",
         "_blocks(R, matmul(nm.skew(t), R), R)",
         "_blocks(R, matmul(R, nm.skew(t)), R)",
+        1,
+    ),
+    "eigen_gap": (
+        "rotjax/_eigen.py",
+        "inv_g = [safe_div(1.0, g, tol) for g in gaps]",
+        "inv_g = [safe_div(0.5, g, tol) for g in gaps]",
         1,
     ),
 }

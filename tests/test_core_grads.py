@@ -12,6 +12,7 @@ from helpers import (
     angle_diff,
     assert_close,
     check_grads,
+    check_hessian,
     is_proper,
     random_quaternions,
     sweep,
@@ -142,9 +143,9 @@ def _check_grads_euler(name, seq, x, batch=False):
 
 @pytest.mark.parametrize("name", sweep(sorted(MATRIX_FUNCTIONS), fast=["shepperd"]))
 def test_check_grads_matrix_functions_on_and_off_so3(name):
-    """The derivative of the function computed, in every direction (check_grads draws random
-    3x3 directions), to second order, in both modes."""
-    _check_grads(MATRIX_FUNCTIONS[name], (_noisy_batch(3),), order=2, modes=("fwd", "rev"))
+    """The derivative of the function computed, along every basis direction, to second order,
+    in both modes: the Jacobians and the Hessian against finite differences (one program)."""
+    check_hessian(MATRIX_FUNCTIONS[name], _noisy_batch(3))
 
 
 # Order 2 is slow: matrix_to_euler's derivative is JAX's of the Shepperd column (checked to
@@ -156,8 +157,7 @@ def test_check_grads_matrix_to_euler_on_and_off_so3(seq, order):
     if order == 1:  # through the sequence's shared program
         _check_grads_euler("matrix_to_euler", seq, _noisy_batch(4), batch=True)
     else:
-        f = lambda m: rj.matrix_to_euler(m, seq)  # noqa: E731
-        _check_grads(f, (_noisy_batch(4),), order=order, modes=("fwd", "rev"))
+        check_hessian(lambda m: rj.matrix_to_euler(m, seq), _noisy_batch(4))
 
 
 @pytest.mark.parametrize("seq", SEQS, scope="module")

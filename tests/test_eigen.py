@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import mpmath
 import numpy as np
 import pytest
-from helpers import check_grads, hessian_rows, sweep
+from helpers import check_hessian, hessian_rows, sweep
 from scipy.spatial.transform import Rotation
 
 import rotjax as rj
@@ -126,14 +126,13 @@ POINTS = np.stack(
 
 
 @pytest.mark.slow  # compiles the kernel's second-derivative programs
-@pytest.mark.parametrize("k", range(len(POINTS)))
-def test_second_derivatives(k):
+def test_second_derivatives():
     """At the identity, 180 degrees, a rotation and a noisy matrix: ``nined_to_matrix``'s first
-    and second derivatives match finite differences, and the full Hessian of the optimal
-    ``matrix_to_quaternion`` is finite (sign-free matrix outputs, so the ``w >= 0`` choice at
-    180 degrees does not matter). The Hessians of all four points are one jitted program."""
-    check_grads(rj.nined_to_matrix, (POINTS[k].reshape(9),), order=2, modes=["fwd", "rev"])
-    assert np.isfinite(_optimal_hessians()[k]).all()
+    and second derivatives match finite differences (one program for the four points), and the
+    full Hessian of the optimal ``matrix_to_quaternion`` is finite (sign-free matrix outputs, so
+    the ``w >= 0`` choice at 180 degrees does not matter)."""
+    check_hessian(rj.nined_to_matrix, POINTS.reshape(len(POINTS), 9))
+    assert np.isfinite(_optimal_hessians()).all()
 
 
 def _optimal(M):
@@ -156,10 +155,10 @@ def test_mean_and_align_hessians_finite():
     second derivatives match finite differences there."""
     q = np.tile(np.array([0.1, 0.2, 0.3, 0.9]), (3, 1))
     # jax.hessian's (forward over reverse) Hessians, to rounding, by one jitted program each
-    # (helpers.hessian_rows; a leading axis of one row), not a vmapped jacfwd(jacrev)
-    hess = hessian_rows(rj.quaternion_mean, q[None])[3][0]
+    # (helpers.hessian_rows; a leading axis of one row), not a vmapped jacfwd(jacrev); the
+    # mean's against differences of its Jacobian in the same program (helpers.check_hessian)
+    hess = check_hessian(rj.quaternion_mean, q[None])[0]
     assert hess.shape == (4, 3, 4, 3, 4) and np.isfinite(hess).all()
-    check_grads(rj.quaternion_mean, (q,), order=2, modes=["fwd", "rev"])
     a = np.eye(3)
     hess = hessian_rows(lambda a: rj.align_vectors(a, np.eye(3)), a[None])[3][0]
     assert hess.shape == (4, 3, 3, 3, 3) and np.isfinite(hess).all()

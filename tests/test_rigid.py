@@ -9,7 +9,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import assert_close, assert_same_rotation, check_grads, hessian_rows, jacobian_rows
+from helpers import (
+    assert_close,
+    assert_same_rotation,
+    check_hessian,
+    hessian_rows,
+    jacobian_rows,
+)
 from hypothesis import example, given
 from hypothesis import strategies as st
 from scipy.spatial.transform import RigidTransform as SciTf
@@ -437,16 +443,16 @@ def _pose_log(x):
     return Tf.from_exp_coords(x).as_exp_coords()
 
 
-# Slow: check_grads' second-order programs of the pose (test_se3 checks the same coordinates'
+# Slow: second-order programs of the pose (test_se3 checks the same coordinates'
 # functions at their singular points by default).
 @pytest.mark.slow
 def test_exp_derivatives_finite_and_right():
     """At every point of SINGULAR (0, 1e-300, tiny, the series cut, pi, two pi): first and
-    second derivatives of the pose matrix agree with finite differences (check_grads at order
-    2, forward and reverse, on the batch of all points: its elementwise tolerances judge each
-    point's rows), the Jacobian and the Hessian of a sum of cubes are finite."""
+    second derivatives of the pose matrix agree with finite differences (helpers.check_hessian
+    on the batch of all points: its elementwise tolerances judge each point's rows), the
+    Jacobian and the Hessian of a sum of cubes are finite."""
     xi = _at(SINGULAR)
-    check_grads(_pose_matrix, (xi,), order=2, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
+    check_hessian(_pose_matrix, xi, atol=1e-6, rtol=1e-6)
     # one program: the Jacobian and jax.hessian's forward-over-reverse Hessian (of each
     # point's sum of cubes: the sum over the points separates)
     cubes = jax.grad(lambda x: jnp.sum(_pose_matrix(x) ** 3))
@@ -461,7 +467,7 @@ def test_log_derivatives_finite_and_exact():
     Jacobian is the identity, exactly at 0 and at 180 degrees too (the derivative of the
     formula computed), by forward and by reverse mode; its second derivative is finite, and
     zero away from the series cut; away from pi (where finite differences cross the log's cut)
-    check_grads at order 2 on the batch of those points."""
+    the Jacobians and the Hessian against finite differences at those points."""
     wheres = ["zero", "tiny", "small", "threshold", "pi", "x_pi"]
     xi = _at(wheres)
 
@@ -477,7 +483,7 @@ def test_log_derivatives_finite_and_exact():
         if where != "threshold":
             assert_close(s, np.zeros((6, 6, 6)), atol=2e-14, err_msg=where)
     away = _at([w for w in wheres if "pi" not in w])
-    check_grads(_pose_log, (away,), order=2, modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
+    check_hessian(_pose_log, away, atol=1e-6, rtol=1e-6)
 
 
 def test_derivative_at_identity_is_the_hat_map():
