@@ -28,7 +28,9 @@ docs' home page that differ from the README's two, a double-backtick span
 in a public docstring, a Returns type that is not a type expression, a missing Returns or
 Examples section or annotation, or a warning from the docstring parser.
 Usage, from the repository root: `python .ci/doc_examples.py [FILE ...]` (no FILE: the
-README, every page under docs/, then the docstring check and examples).
+README, every page under docs/, then the docstring check and examples);
+`--docstrings [K/N]` runs the docstrings' examples (the K-th of N parts), `--check` the format
+checks alone. The test suite's slow tier (`tests/test_docs.py`) runs them in these parts.
 """
 
 import ast
@@ -45,6 +47,8 @@ BLOCK = re.compile(r"^```python\n(.*?)^```", flags=re.S | re.M)
 ROLE = re.compile(r":(?:py:)?(?:func|class|meth|data|attr|mod|obj|exc|ref|const|term):`")
 DOUBLE_BACKTICK = re.compile(r"(?<!`)``(?!`)")
 DOCSTRINGS = "--docstrings"
+CHECK = "--check"
+SUMMARY = "examples run:"  # the last line of a run's stderr: how many examples ran
 # Documented dunder methods that are part of the API (operators and calls).
 API_DUNDERS = {"__call__", "__mul__", "__pow__"}
 
@@ -52,13 +56,15 @@ API_DUNDERS = {"__call__", "__mul__", "__pow__"}
 def run_file(path: Path) -> int:
     namespace = {"__name__": "__main__"}
     failed = 0
-    for i, code in enumerate(BLOCK.findall(path.read_text())):
+    blocks = BLOCK.findall(path.read_text())
+    for i, code in enumerate(blocks):
         try:
             exec(compile(code, f"{path}, example {i + 1}", "exec"), namespace)
         except Exception:
             failed += 1
             print(f"FAILED: {path}, example {i + 1}", file=sys.stderr)
             traceback.print_exc()
+    print(f"{SUMMARY} {len(blocks)}, failed {failed}", file=sys.stderr)
     return failed
 
 
@@ -240,27 +246,43 @@ def check_install_commands() -> list[str]:
     return []
 
 
-def run_docstrings() -> int:
-    failed = 0
-    for path, obj, _ in public_objects():
+def run_docstrings(part: int = 0, parts: int = 1) -> int:
+    failed = ran = 0
+    for path, obj, _ in list(public_objects())[part::parts]:
         for i, code in enumerate(examples(obj)):
+            ran += 1
             try:
                 exec(compile(code, f"{path}, example {i + 1}", "exec"), {"__name__": "__main__"})
             except Exception:
                 failed += 1
                 print(f"FAILED: {path}, example {i + 1}", file=sys.stderr)
                 traceback.print_exc()
+    print(f"{SUMMARY} {ran}, failed {failed}", file=sys.stderr)
     return failed
 
 
+def format_errors() -> list[str]:
+    """The format errors of the README, docs/ and the public docstrings."""
+    return check_pages(pages()) + check_install_commands() + check_docstrings()
+
+
+def pages() -> list[Path]:
+    return [Path("README.md"), *sorted(Path("docs").rglob("*.md"))]
+
+
 def main(argv: list[str]) -> int:
-    if argv == [DOCSTRINGS]:
-        return 1 if run_docstrings() else 0
+    if argv[:1] == [DOCSTRINGS]:
+        part, parts = map(int, (argv[1] if len(argv) > 1 else "0/1").split("/"))
+        return 1 if run_docstrings(part, parts) else 0
+    if argv == [CHECK]:
+        errors = format_errors()
+        for e in errors:
+            print(f"DOCS CHECK: {e}", file=sys.stderr)
+        return 1 if errors else 0
     if len(argv) == 1:
         return 1 if run_file(Path(argv[0])) else 0
-    pages = [Path("README.md"), *sorted(Path("docs").rglob("*.md"))]
-    files = [Path(p) for p in argv] or pages
-    errors = [] if argv else check_pages(pages) + check_install_commands() + check_docstrings()
+    files = [Path(p) for p in argv] or pages()
+    errors = [] if argv else format_errors()
     for e in errors:
         print(f"DOCS CHECK: {e}", file=sys.stderr)
     runs = [[str(p)] for p in files if BLOCK.search(p.read_text())]

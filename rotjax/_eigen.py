@@ -294,7 +294,8 @@ def _run(B, nan_at_zero=True):
     derivative rules take `(V, s)` from this same run, so that a derivative needs no second
     one; where nothing is differentiated they are unused, and XLA drops them."""
     polar = functools.partial(_polar, nan_at_zero=nan_at_zero)
-    return jax.lax.stop_gradient(_by_chunks(polar, B))
+    # Stopped at the input: a caller's jvp then traces the kernel once, without tangents.
+    return _by_chunks(polar, jax.lax.stop_gradient(B))
 
 
 def _nearest(B, nan_at_zero=True):
