@@ -94,7 +94,7 @@ def pow2_factors(x, axes):
     n = len(axes)
     if sorted(a % x.ndim for a in axes) != list(range(x.ndim - n, x.ndim)):
         raise ValueError(f"axes must be the trailing axes, got {axes} for shape {x.shape}")
-    flat = x.reshape(*x.shape[: x.ndim - n], -1)
+    flat = jax.lax.stop_gradient(x).reshape(*x.shape[: x.ndim - n], -1)  # constant factors
     if flat.shape[-1] <= UNROLL_MAX:
         # Elementwise maxima fuse with their neighbours and keep NaN (a max reduction over a
         # small axis is a loop of its own; with NaN made infinite first, a slow one).
