@@ -29,8 +29,8 @@ in a public docstring, a Returns type that is not a type expression, a missing R
 Examples section or annotation, or a warning from the docstring parser.
 Usage, from the repository root: `python .ci/doc_examples.py [FILE ...]` (no FILE: the
 README, every page under docs/, then the docstring check and examples);
-`--docstrings [K/N]` runs the docstrings' examples (the K-th of N parts), `--check` the format
-checks alone. The test suite's slow tier (`tests/test_docs.py`) runs them in these parts.
+`--docstrings [K/N]` runs the docstrings' examples (the K-th of N parts). The test suite's slow
+tier (`tests/test_docs.py`) runs them in these parts, and `format_errors` in its own process.
 """
 
 import ast
@@ -47,7 +47,6 @@ BLOCK = re.compile(r"^```python\n(.*?)^```", flags=re.S | re.M)
 ROLE = re.compile(r":(?:py:)?(?:func|class|meth|data|attr|mod|obj|exc|ref|const|term):`")
 DOUBLE_BACKTICK = re.compile(r"(?<!`)``(?!`)")
 DOCSTRINGS = "--docstrings"
-CHECK = "--check"
 SUMMARY = "examples run:"  # the last line of a run's stderr: how many examples ran
 # Documented dunder methods that are part of the API (operators and calls).
 API_DUNDERS = {"__call__", "__mul__", "__pow__"}
@@ -266,19 +265,15 @@ def format_errors() -> list[str]:
     return check_pages(pages()) + check_install_commands() + check_docstrings()
 
 
-def pages() -> list[Path]:
-    return [Path("README.md"), *sorted(Path("docs").rglob("*.md"))]
+def pages(root: Path = Path()) -> list[Path]:
+    """The README and every page under docs/, as paths under `root`."""
+    return [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
 
 
 def main(argv: list[str]) -> int:
     if argv[:1] == [DOCSTRINGS]:
         part, parts = map(int, (argv[1] if len(argv) > 1 else "0/1").split("/"))
         return 1 if run_docstrings(part, parts) else 0
-    if argv == [CHECK]:
-        errors = format_errors()
-        for e in errors:
-            print(f"DOCS CHECK: {e}", file=sys.stderr)
-        return 1 if errors else 0
     if len(argv) == 1:
         return 1 if run_file(Path(argv[0])) else 0
     files = [Path(p) for p in argv] or pages()

@@ -75,9 +75,9 @@ def _pow2_factors(m):
     """Two exact powers of two per batch element, `(f0, f1)`, such that `m * f0 * f1` lies in
     `[1/2, 1)` for `m` the largest `|entry|` of each batch element; NaN where `m` is not
     finite. Applied one after the other (their product can overflow): `f0` brings `m` within
-    `2^+-k` (`k` half the exponent range), `f1` is `exponent_scale` of the result, halved."""
+    `2^+-k` (`k` half the exponent range), `f1` is `exponent_scale` of the result, halved.
+    `m` is a constant: `pow2_factors` stops the gradient before taking it."""
     dt = m.dtype
-    m = jax.lax.stop_gradient(m)  # the factors are constants: the derivative is x's times them
     k = float(2 ** (jnp.finfo(dt).nexp - 2))  # 2^k, 2^-k, and their products with 2^E stay normal
     big, small = jnp.asarray(2.0**k, dt), jnp.asarray(2.0**-k, dt)
     c = jnp.where(m > big, small, jnp.where(m < small, big, 1.0))
@@ -94,7 +94,8 @@ def pow2_factors(x, axes):
     n = len(axes)
     if sorted(a % x.ndim for a in axes) != list(range(x.ndim - n, x.ndim)):
         raise ValueError(f"axes must be the trailing axes, got {axes} for shape {x.shape}")
-    flat = jax.lax.stop_gradient(x).reshape(*x.shape[: x.ndim - n], -1)  # constant factors
+    # The factors are constants (the derivative is x's times them): no tangent is traced.
+    flat = jax.lax.stop_gradient(x).reshape(*x.shape[: x.ndim - n], -1)
     if flat.shape[-1] <= UNROLL_MAX:
         # Elementwise maxima fuse with their neighbours and keep NaN (a max reduction over a
         # small axis is a loop of its own; with NaN made infinite first, a slow one).

@@ -18,11 +18,7 @@ _spec = importlib.util.spec_from_file_location("doc_examples", SCRIPT)
 docs = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(docs)
 
-PAGES = [
-    str(p.relative_to(ROOT))
-    for p in (ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")))
-    if docs.BLOCK.search(p.read_text())
-]
+PAGES = [str(p.relative_to(ROOT)) for p in docs.pages(ROOT) if docs.BLOCK.search(p.read_text())]
 DOCSTRING_PARTS = 4  # the docstrings' examples take about a minute cold: split between workers
 
 pytestmark = pytest.mark.slow
