@@ -52,19 +52,28 @@ SUMMARY = "examples run:"  # the last line of a run's stderr: how many examples 
 API_DUNDERS = {"__call__", "__mul__", "__pow__"}
 
 
-def run_file(path: Path) -> int:
+def _run_blocks(blocks, fresh_namespace: bool) -> int:
+    """Execute `(name, code)` blocks in order, in one namespace or (`fresh_namespace`) each in
+    its own; report each failure and, last on stderr, how many ran and failed."""
     namespace = {"__name__": "__main__"}
-    failed = 0
-    blocks = BLOCK.findall(path.read_text())
-    for i, code in enumerate(blocks):
+    failed = ran = 0
+    for name, code in blocks:
+        ran += 1
+        if fresh_namespace:
+            namespace = {"__name__": "__main__"}
         try:
-            exec(compile(code, f"{path}, example {i + 1}", "exec"), namespace)
+            exec(compile(code, name, "exec"), namespace)
         except Exception:
             failed += 1
-            print(f"FAILED: {path}, example {i + 1}", file=sys.stderr)
+            print(f"FAILED: {name}", file=sys.stderr)
             traceback.print_exc()
-    print(f"{SUMMARY} {len(blocks)}, failed {failed}", file=sys.stderr)
+    print(f"{SUMMARY} {ran}, failed {failed}", file=sys.stderr)
     return failed
+
+
+def run_file(path: Path) -> int:
+    blocks = BLOCK.findall(path.read_text())
+    return _run_blocks(((f"{path}, example {i + 1}", code) for i, code in enumerate(blocks)), False)
 
 
 @functools.cache
@@ -246,18 +255,14 @@ def check_install_commands() -> list[str]:
 
 
 def run_docstrings(part: int = 0, parts: int = 1) -> int:
-    failed = ran = 0
-    for path, obj, _ in list(public_objects())[part::parts]:
-        for i, code in enumerate(examples(obj)):
-            ran += 1
-            try:
-                exec(compile(code, f"{path}, example {i + 1}", "exec"), {"__name__": "__main__"})
-            except Exception:
-                failed += 1
-                print(f"FAILED: {path}, example {i + 1}", file=sys.stderr)
-                traceback.print_exc()
-    print(f"{SUMMARY} {ran}, failed {failed}", file=sys.stderr)
-    return failed
+    return _run_blocks(
+        (
+            (f"{path}, example {i + 1}", code)
+            for path, obj, _ in list(public_objects())[part::parts]
+            for i, code in enumerate(examples(obj))
+        ),
+        True,
+    )
 
 
 def format_errors() -> list[str]:
