@@ -115,12 +115,9 @@ def _markley(R):
     and unstacked in between: that cost a transposing loop).
     """
     cols, diag, _ = _homogeneous_k(R, split=True)
-    # The step multiplies the selected column c = K e_j itself: normalising c first changes
-    # neither the direction of K c nor, after the hemisphere scale, the result. No small
-    # divisor: |K c|^2 = e_j^T K^4 e_j >= (e_j^T K e_j)^4 >= t^4 (K symmetric), and the
-    # prescaled R keeps it far from overflow.
-    c, _ = select_column(cols, diag)
-    v = _k_times(cols, c)
+    c, sq = select_column(cols, diag)
+    s0 = _hemisphere_scale(c, sq)
+    v = _k_times(cols, [x * s0 for x in c])
     k = _hemisphere_scale(v, sum_squares(v))
     return stack([x * k for x in v])
 
