@@ -94,13 +94,15 @@ def _scalar_last(q, scalar_first):
     return to_scalar_last(float_array(q), scalar_first)
 
 
-@jit
-def _rotation_compose(p, q):
+@jit(static_argnames=("rescale_p", "rescale_q"))
+def _rotation_compose(p, q, rescale_p=True, rescale_q=True):
     # The stored quaternions need not be unit, nor is their product: the product of the
     # rescaled ones (exact powers of two) has a norm in [1, 16), which no reader depends on
-    # (each normalises, or is homogeneous), so it is stored as it is.
+    # (each normalises, or is homogeneous), so it is stored as it is. A unit quaternion (see
+    # Rotation._unit) is not rescaled: the scaling is exact, so the readers' results are the
+    # same bits either way.
     p, q = broadcast_batch(p, q, trailing=(1, 1))
-    return quat_multiply(quat_rescaled(p), quat_rescaled(q))
+    return quat_multiply(quat_rescaled(p) if rescale_p else p, quat_rescaled(q) if rescale_q else q)
 
 
 @jit(static_argnames="inverse")
@@ -323,8 +325,10 @@ class Rotation(BatchedPytree):
     # to exactly quaternion_to_euler(q, seq); as_quat and the methods that need a unit
     # quaternion read the normalised ``_quat``. Nothing else is stored: the tree structure is
     # the same for every constructor, method and operator (a scan carry, both branches of a
-    # cond), and the value alone decides the result.
-    __slots__ = ("_stored",)
+    # cond), and the value alone decides the result. ``_unit``, outside the tree (so lost, and
+    # False, once the object is flattened): the constructor stored a unit quaternion (to
+    # rounding), which a product need not rescale (``_rotation_compose``); it saves work only.
+    __slots__ = ("_stored", "_unit")
     _LEAVES = ("_stored",)
     _NOUN = "rotation"
     # NumPy's operators defer to ours (``array * r`` is not an object-array product), and ours
@@ -349,13 +353,24 @@ class Rotation(BatchedPytree):
         if scalar_first:
             q = _scalar_last(q, scalar_first)
         self._stored = q
+        self._unit = False
 
     @classmethod
-    def _raw(cls, quat):
-        """A rotation holding the quaternion `quat` (any non-zero norm) as it is."""
+    def _raw(cls, quat, unit=False):
+        """A rotation holding the quaternion `quat` (any non-zero norm) as it is; `unit`: it
+        is a unit quaternion to rounding (or NaN), as computed by a conversion."""
         r = object.__new__(cls)
         r._stored = quat
+        r._unit = unit
         return r
+
+    def __setstate__(self, state):
+        super().__setstate__(state)
+        self._unit = False
+
+    def __setitem__(self, indexer, value):
+        super().__setitem__(indexer, value)
+        self._unit = self._unit and value._unit
 
     # --- shape ---------------------------------------------------------------------------
 
@@ -420,10 +435,10 @@ class Rotation(BatchedPytree):
         if m.size == 0:  # an empty batch (the nearest-rotation solver needs an element)
             return Rotation._raw(jnp.zeros(m.shape[:-2] + (4,), m.dtype))
         if assume_valid:
-            return Rotation._raw(matrix_to_quaternion(m, method="shepperd"))
+            return Rotation._raw(matrix_to_quaternion(m, method="shepperd"), unit=True)
         if isinstance(m, np.ndarray) and np.any(np.linalg.det(m) <= 0):
             raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
-        return Rotation._raw(_from_matrix_checked(m))
+        return Rotation._raw(_from_matrix_checked(m), unit=True)
 
     @staticmethod
     def from_rotvec(rotvec: ArrayLike, degrees: bool = False) -> Rotation:
@@ -448,7 +463,7 @@ class Rotation(BatchedPytree):
         v = constructor_input(rotvec)
         if v.ndim < 1 or v.shape[-1] != 3:
             raise ValueError(f"Expected `rot_vec` to have shape (..., 3), got {v.shape}")
-        return Rotation._raw(rotvec_to_quaternion(v, degrees=degrees))
+        return Rotation._raw(rotvec_to_quaternion(v, degrees=degrees), unit=True)
 
     @staticmethod
     def from_mrp(mrp: ArrayLike) -> Rotation:
@@ -474,7 +489,7 @@ class Rotation(BatchedPytree):
         p = constructor_input(mrp)
         if p.ndim < 1 or p.shape[-1] != 3:
             raise ValueError(f"Expected `mrp` to have shape (..., 3), got {p.shape}")
-        return Rotation._raw(mrp_to_quaternion(p))
+        return Rotation._raw(mrp_to_quaternion(p), unit=True)
 
     @staticmethod
     def from_euler(seq: str, angles: ArrayLike, degrees: bool = False) -> Rotation:
@@ -530,7 +545,7 @@ class Rotation(BatchedPytree):
             a = jnp.concatenate([a, jnp.zeros(a.shape[:-1] + (3 - k,), a.dtype)], axis=-1)
         else:
             parse_seq(seq)
-        return Rotation._raw(euler_to_quaternion(a, seq, degrees=degrees))
+        return Rotation._raw(euler_to_quaternion(a, seq, degrees=degrees), unit=True)
 
     @staticmethod
     def from_davenport(
@@ -581,7 +596,7 @@ class Rotation(BatchedPytree):
                 f"{ax.shape} axes."
             )
         q = davenport_to_quaternion(ax, a, extrinsic=extrinsic, degrees=degrees)
-        return Rotation._raw(q)
+        return Rotation._raw(q, unit=True)
 
     @staticmethod
     def identity(
@@ -623,7 +638,7 @@ class Rotation(BatchedPytree):
         if num is not None:
             shape = (num,)
         shape = _batch_shape(shape)
-        return Rotation._raw(identity_quat(shape, dtype if dtype is not None else float))
+        return Rotation._raw(identity_quat(shape, dtype if dtype is not None else float), unit=True)
 
     @staticmethod
     def random(
@@ -732,7 +747,7 @@ class Rotation(BatchedPytree):
             # 60 12
             ```
         """
-        return cls._raw(rotation_group(group, axis))
+        return cls._raw(rotation_group(group, axis), unit=True)
 
     @staticmethod
     def align_vectors(
@@ -1025,7 +1040,10 @@ class Rotation(BatchedPytree):
                 f"Cannot broadcast {np_shapes[0]} rotations in first to {np_shapes[1]} "
                 "rotations in second object."
             ) from None
-        return Rotation._raw(_rotation_compose(self._stored, other._stored))
+        stored = _rotation_compose(
+            self._stored, other._stored, rescale_p=not self._unit, rescale_q=not other._unit
+        )
+        return Rotation._raw(stored, unit=self._unit and other._unit)
 
     def __pow__(self, n: ArrayLike, modulus: None = None) -> Rotation:
         """Fractional power: `n` times the rotation angle about the same axis.
@@ -1050,7 +1068,7 @@ class Rotation(BatchedPytree):
             ```
         """
         e = self._exponent(n, modulus)
-        return Rotation._raw(quaternion_power(self._quat, e))
+        return Rotation._raw(quaternion_power(self._quat, e), unit=True)
 
     def inv(self) -> Rotation:
         """The inverse rotation(s).
@@ -1067,7 +1085,7 @@ class Rotation(BatchedPytree):
             # 0.0
             ```
         """
-        return Rotation._raw(quaternion_conjugate(self._stored))
+        return Rotation._raw(quaternion_conjugate(self._stored), unit=self._unit)
 
     def apply(self, vectors: ArrayLike, inverse: bool = False) -> Array:
         """Rotate vectors: `R @ v` (`R.T @ v` with `inverse`).
@@ -1213,7 +1231,7 @@ class Rotation(BatchedPytree):
             w = jnp.reshape(jnp.transpose(w, keep + axes), [q.shape[i] for i in keep] + [-1])
         qt = jnp.transpose(q, keep + axes + (nb,))
         qt = jnp.reshape(qt, [q.shape[i] for i in keep] + [-1, 4])
-        return Rotation._raw(quaternion_mean(qt, w))
+        return Rotation._raw(quaternion_mean(qt, w), unit=True)
 
     def reduce(
         self,

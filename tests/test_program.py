@@ -276,6 +276,9 @@ COMPOSED = {
     },
     "Rotation *": (lambda p, q: (rj.Rotation.from_quat(p) * rj.Rotation.from_quat(q)).as_quat(),
                    [(4,), (4,)]),
+    "Rotation * of conversions": (
+        lambda a, b, v: (rj.Rotation.from_rotvec(a) * rj.Rotation.from_euler(SEQ, b)).apply(v),
+        [(3,), (3,), (3,)]),
     "Rotation.inv": (lambda q: rj.Rotation.from_quat(q).inv().as_quat(), [(4,)]),
     "Rotation.apply": (lambda q, v: rj.Rotation.from_quat(q).apply(v), [(4,), (3,)]),
     "Rotation.magnitude": (lambda q: rj.Rotation.from_quat(q).magnitude(), [(4,)]),

@@ -452,3 +452,62 @@ def test_align_vectors_infinite_weight_near_180_degrees():
         r_inf, _ = Rotation.align_vectors(a, b, weights=[np.inf, 1.0])
         worst = max(worst, np.abs(np.asarray(r_inf.as_matrix()) - R).max())
     assert worst < 1e-14, worst
+
+
+# Constructors that mark their quaternion as unit (Rotation._unit), so that a product does not
+# rescale it; on inputs far from unit size, at 180 degrees and at the identity.
+_ANGLES = np.array([[0.0, 0.0, 0.0], [1e-20, 0.0, 0.0], [0.3, -2.0, 1.0], [np.pi, 0, 0],
+                    [4e3, -1e2, 7.0], [1e-3, 2.5, -3.1]])  # fmt: skip
+_UNIT_BUILT = {
+    "from_rotvec": lambda x: Rotation.from_rotvec(x),
+    "from_euler": lambda x: Rotation.from_euler("ZXZ", x),
+    "from_mrp": lambda x: Rotation.from_mrp(x * np.array([1e15, 1.0, 1e-15])[:, None].repeat(2, 0)),
+    "from_matrix": lambda x: Rotation.from_matrix(
+        np.asarray(rotjax.rotvec_to_matrix(x)) * 1e20, assume_valid=True
+    ),
+    "from_matrix projected": lambda x: Rotation.from_matrix(
+        np.asarray(rotjax.rotvec_to_matrix(x)) + 1e-3 * np.cos(np.arange(9)).reshape(3, 3)
+    ),
+    "from_davenport": lambda x: Rotation.from_davenport(np.eye(3), "e", x),
+    "pow": lambda x: Rotation.from_quat(np.c_[x, np.ones(len(x))] * 1e30) ** 0.3,
+    "mean": lambda x: Rotation.from_rotvec(np.stack([x, 0.5 * x], 1)).mean(axis=1),
+    "identity": lambda x: Rotation.identity(len(x), dtype=x.dtype),
+    "create_group": lambda x: Rotation.create_group("C6"),  # float64 whatever x is
+    "product": lambda x: Rotation.from_rotvec(x) * Rotation.from_euler("xyz", x[::-1]),
+    "inv": lambda x: Rotation.from_rotvec(x).inv(),
+}
+
+
+def _flattened(r):
+    """The same rotation, as jit, vmap and grad see it: the flag is not in the tree."""
+    return jax.tree.unflatten(*jax.tree.flatten(r)[::-1])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_unit_marked_rotations_store_unit_quaternions_and_compose_to_the_same_bits(dtype):
+    """The flag only skips work: every constructor that sets it stores a quaternion of norm 1
+    to rounding, and each reader gives the same bits for a product with and without the
+    rescaling of its factors (exact powers of two)."""
+    x = _ANGLES.astype(dtype)
+    raw = Rotation.from_quat((np.c_[x, np.ones(len(x))] * 1e15).astype(dtype))  # not unit
+    v = V.astype(dtype)
+    for name, build in _UNIT_BUILT.items():
+        r = build(x)
+        assert r._unit and not _flattened(r)._unit, name
+        n = np.linalg.norm(np.asarray(r._stored, np.float64), axis=-1)
+        np.testing.assert_array_less(np.abs(n - 1), 8 * np.finfo(dtype).eps, err_msg=name)
+        k = len(r)
+        pairs = [(r, r[::-1])]
+        if r._stored.dtype == dtype:
+            pairs += [(r, raw[:k]), (raw[:k], r)]
+        for a, b in pairs:
+            for read in (
+                lambda p: p.as_quat(),
+                lambda p: p.as_matrix(),
+                lambda p: p.magnitude(),
+                lambda p: p.apply(v[:k].astype(p.as_quat().dtype)),
+                lambda p: p.as_rotvec(),
+            ):
+                np.testing.assert_array_equal(
+                    read(a * b), read(_flattened(a) * _flattened(b)), err_msg=name
+                )

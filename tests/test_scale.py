@@ -379,3 +379,22 @@ def test_mrp_to_quaternion_of_any_norm(dtype):
         want = [float(2 * x / (1 + p2)) for x in pm] + [float((1 - p2) / (1 + p2))]
         got = np.asarray(rj.mrp_to_quaternion(p)).astype(np.float64)
         assert_close(got, want, atol=4 * np.finfo(dtype).eps, err_msg=f"|p| = {s:g}")
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_rotation_products_at_any_scale(dtype):
+    """A Rotation keeps the quaternion it was given (any norm) and stores products unnormalised:
+    a product of factors at the ends of the range, and a chain of such products (whose norms
+    multiply), neither overflows nor underflows, and reads as the product of the unit ones."""
+    eps = np.finfo(dtype).eps
+    p, q, v = Q.astype(dtype), P.astype(dtype), V.astype(dtype)
+    want = rj.Rotation.from_quat(p) * rj.Rotation.from_quat(q)
+    for s, t in ((SCALES[dtype][-1], SCALES[dtype][-1]), (SCALES[dtype][0], SCALES[dtype][0]),
+                 (SCALES[dtype][0], SCALES[dtype][-1])):  # fmt: skip
+        got = rj.Rotation.from_quat(p * dtype(s)) * rj.Rotation.from_quat(q * dtype(t))
+        assert_close(got.as_matrix(), want.as_matrix(), atol=8 * eps, err_msg=f"{s} {t}")
+        assert_close(got.apply(v), want.apply(v), atol=8 * eps * np.abs(v).max())
+    chain, unit = rj.Rotation.from_quat(p * dtype(SCALES[dtype][-1])), rj.Rotation.from_quat(p)
+    for _ in range(6):
+        chain, unit = chain * chain, unit * unit  # norms s^2, s^4, ..., s^64
+    assert_close(chain.as_quat(canonical=True), unit.as_quat(canonical=True), atol=64 * eps)
