@@ -143,7 +143,8 @@ class Slerp:
                     f"{float(hi)}], both inclusive."
                 )
         return Rotation._raw(
-            _slerp_eval(self.times, self.timedelta, self.rotations._quat, self.rotvecs, t)
+            _slerp_eval(self.times, self.timedelta, self.rotations._quat, self.rotvecs, t),
+            unit=True,
         )
 
 
@@ -307,7 +308,7 @@ class RotationSpline:
         if t.ndim > 1:
             raise ValueError("`times` must be at most 1-dimensional.")
         out = _spline_eval(self.times, self.rotations._quat, self._coeffs, t, order)
-        return Rotation._raw(out) if order == 0 else out
+        return Rotation._raw(out, unit=True) if order == 0 else out
 
 
 @jit(static_argnames="order")

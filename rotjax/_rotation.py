@@ -368,6 +368,11 @@ class Rotation(BatchedPytree):
         super().__setstate__(state)
         self._unit = False
 
+    def __getitem__(self, indexer):
+        r = super().__getitem__(indexer)
+        r._unit = self._unit
+        return r
+
     def __setitem__(self, indexer, value):
         super().__setitem__(indexer, value)
         self._unit = self._unit and value._unit

@@ -475,6 +475,13 @@ _UNIT_BUILT = {
     "create_group": lambda x: Rotation.create_group("C6"),  # float64 whatever x is
     "product": lambda x: Rotation.from_rotvec(x) * Rotation.from_euler("xyz", x[::-1]),
     "inv": lambda x: Rotation.from_rotvec(x).inv(),
+    "getitem": lambda x: Rotation.from_rotvec(np.stack([x, -x], 1))[:, 1],
+    "Slerp": lambda x: Slerp([0.0, 1.0], Rotation.from_rotvec(x[2:4]))(
+        np.linspace(0.0, 1.0, len(x)).astype(x.dtype)
+    ),
+    "RotationSpline": lambda x: rotjax.RotationSpline(
+        np.arange(len(x), dtype=x.dtype), Rotation.from_rotvec(x)
+    )(np.linspace(0.0, len(x) - 1.0, len(x)).astype(x.dtype)),
 }
 
 
