@@ -490,31 +490,55 @@ def _flattened(r):
     return jax.tree.unflatten(*jax.tree.flatten(r)[::-1])
 
 
+def _reads(v):
+    return (
+        lambda p: p.as_quat(),
+        lambda p: p.as_matrix(),
+        lambda p: p.magnitude(),
+        lambda p: p.apply(v[: len(p)].astype(p.as_quat().dtype)),
+        lambda p: p.as_rotvec(),
+    )
+
+
+def _raw_rotations(x):
+    return Rotation.from_quat((np.c_[x, np.ones(len(x))] * 1e15).astype(x.dtype))  # not unit
+
+
+def _assert_same_bits(a, b, v, what):
+    for read in _reads(v):
+        np.testing.assert_array_equal(
+            read(a * b), read(_flattened(a) * _flattened(b)), err_msg=what
+        )
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_unit_marked_rotations_store_unit_quaternions_and_compose_to_the_same_bits(dtype):
+def test_unit_marked_rotations_store_unit_quaternions(dtype):
     """The flag only skips work: every constructor that sets it stores a quaternion of norm 1
-    to rounding, and each reader gives the same bits for a product with and without the
-    rescaling of its factors (exact powers of two)."""
+    to rounding; and each reader gives the same bits for a product with and without the
+    rescaling of its factors (exact powers of two): here for one constructor, for every one in
+    the slow tier (below)."""
     x = _ANGLES.astype(dtype)
-    raw = Rotation.from_quat((np.c_[x, np.ones(len(x))] * 1e15).astype(dtype))  # not unit
-    v = V.astype(dtype)
     for name, build in _UNIT_BUILT.items():
         r = build(x)
         assert r._unit and not _flattened(r)._unit, name
         n = np.linalg.norm(np.asarray(r._stored, np.float64), axis=-1)
         np.testing.assert_array_less(np.abs(n - 1), 8 * np.finfo(dtype).eps, err_msg=name)
+    r, raw = Rotation.from_rotvec(x), _raw_rotations(x)
+    _assert_same_bits(r, raw, V.astype(dtype), "from_rotvec * raw")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_unit_marked_products_read_the_same_bits(dtype):
+    """Every constructor that sets the flag: products with itself and with a raw rotation, on
+    either side, read the same with and without the flag."""
+    x = _ANGLES.astype(dtype)
+    raw = _raw_rotations(x)
+    for name, build in _UNIT_BUILT.items():
+        r = build(x)
         k = len(r)
         pairs = [(r, r[::-1])]
         if r._stored.dtype == dtype:
             pairs += [(r, raw[:k]), (raw[:k], r)]
         for a, b in pairs:
-            for read in (
-                lambda p: p.as_quat(),
-                lambda p: p.as_matrix(),
-                lambda p: p.magnitude(),
-                lambda p: p.apply(v[:k].astype(p.as_quat().dtype)),
-                lambda p: p.as_rotvec(),
-            ):
-                np.testing.assert_array_equal(
-                    read(a * b), read(_flattened(a) * _flattened(b)), err_msg=name
-                )
+            _assert_same_bits(a, b, V.astype(dtype), name)
