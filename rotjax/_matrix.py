@@ -71,6 +71,16 @@ def selected_column(R):
     return select_column(cols, diag)
 
 
+def shepperd_column(R):
+    """The selected column of :func:`selected_column`, sign-flipped to ``w >= 0`` and not
+    normalised: the quaternion of ``R`` at a norm between ``2 t`` and ``4 t`` for a rotation
+    (``t`` of order 1 after the prescaling), for a ``Rotation`` (which stores a quaternion at any norm and whose
+    readers prescale) or any consumer that does not need a unit quaternion. NaN for a
+    non-rotation, as the column."""
+    c, _ = selected_column(R)
+    return stack([jnp.where(c[3] < 0, -x, x) for x in c])
+
+
 def _hemisphere_scale(v, sq):
     """``1 / |v|`` (``sq = |v|^2``, away from 0: see :func:`rotjax._shepperd.select_column`),
     negated where ``w < 0``: ``v * scale`` is the unit quaternion with ``w >= 0``. :func:`rsqrt`

@@ -27,7 +27,7 @@ from ._elementary import atan2
 from ._euler import euler_to_quaternion, parse_seq, quaternion_to_euler
 from ._fitting import align_vectors as _align_vectors
 from ._fitting import quaternion_mean
-from ._matrix import matrix_to_quaternion
+from ._matrix import matrix_to_quaternion, shepperd_column
 from ._mrp import mrp_to_quaternion, quaternion_to_mrp
 from ._numerics import broadcast_batch, check_array, check_static, cross, jit, to_scalar_last
 from ._quaternion import (
@@ -439,8 +439,8 @@ class Rotation(BatchedPytree):
             raise ValueError(f"Expected `matrix` to have shape (..., 3, 3), got {m.shape}")
         if m.size == 0:  # an empty batch (the nearest-rotation solver needs an element)
             return Rotation._raw(jnp.zeros(m.shape[:-2] + (4,), m.dtype))
-        if assume_valid:
-            return Rotation._raw(matrix_to_quaternion(m, method="shepperd"), unit=True)
+        if assume_valid:  # not normalised: the readers prescale (and as_euler needs no norm)
+            return Rotation._raw(shepperd_column(m))
         if isinstance(m, np.ndarray) and np.any(np.linalg.det(m) <= 0):
             raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
         return Rotation._raw(_from_matrix_checked(m), unit=True)

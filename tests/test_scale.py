@@ -398,3 +398,27 @@ def test_rotation_products_at_any_scale(dtype):
     for _ in range(6):
         chain, unit = chain * chain, unit * unit  # norms s^2, s^4, ..., s^64
     assert_close(chain.as_quat(canonical=True), unit.as_quat(canonical=True), atol=64 * eps)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_unchecked_matrix_rotations_at_any_scale(dtype):
+    """``Rotation.from_matrix(assume_valid=True)`` stores the Shepperd column unnormalised: its
+    readers give the unit quaternion, the matrix and the Euler angles of ``R`` for ``s R`` at
+    every scale, NaN for the zero matrix, and a chain of 64 products of such factors (not
+    marked unit, so rescaled) reads as the chain of the unit ones."""
+    eps = np.finfo(dtype).eps
+    m, v = R.astype(dtype), V.astype(dtype)
+    want = rj.Rotation.from_quat(rj.matrix_to_quaternion(m))
+    for s in SCALES[dtype]:
+        got = rj.Rotation.from_matrix(m * dtype(s), assume_valid=True)
+        assert_close(got.as_quat(), rj.matrix_to_quaternion(m), atol=4 * eps, err_msg=s)
+        assert_close(got.as_matrix(), m, atol=8 * eps, err_msg=s)
+        assert_close(got.as_euler("ZXZ"), rj.matrix_to_euler(m, "ZXZ"), atol=64 * eps)
+        assert_close(got.apply(v), want.apply(v), atol=8 * eps * np.abs(v).max())
+    nan = rj.Rotation.from_matrix(np.stack([m[0], 0 * m[1]]), assume_valid=True).as_quat()
+    assert np.isfinite(nan[0]).all() and np.isnan(nan[1]).all()
+    chain = unit = rj.Rotation.from_matrix(m * dtype(SCALES[dtype][-1]), assume_valid=True)
+    unit = rj.Rotation.from_quat(unit.as_quat())
+    for _ in range(6):
+        chain, unit = chain * chain, unit * unit
+    assert_close(chain.as_quat(canonical=True), unit.as_quat(canonical=True), atol=64 * eps)
