@@ -322,5 +322,5 @@ def scaled_pair(u, v):
     """`(u s, v s, s, 1 / s)` for the power of two `s` (exact, no derivative) that brings the
     larger of `|u|`, `|v|` into `[1, 2)`: their squares then neither underflow nor
     overflow."""
-    s, inv = exponent_scale(jax.lax.stop_gradient(jnp.maximum(jnp.abs(u), jnp.abs(v))))
+    s, inv = exponent_scale(u, v)
     return u * s, v * s, s, inv

@@ -17,7 +17,9 @@ from ._numerics import (
     cast,
     check_shape,
     exponent_scale,
+    float_bits,
     from_scalar_last,
+    max_abs_bits,
     public,
     recorded,
     select,
@@ -212,11 +214,10 @@ def _factors(x, y, z, w, seq):
     _, intrinsic = parse_seq(seq)
     # Scale by a power of two (exact) so that the largest component is in [1, 2): the
     # products A conj(C) and A C below then cannot underflow, whatever the norm of q.
-    # (Elementwise maxima, not jnp.max: XLA:CPU splits a reduction into loops of its own.)
-    aq = [jnp.abs(t) for t in (x, y, z, w)]
-    big = jnp.maximum(jnp.maximum(aq[0], aq[1]), jnp.maximum(aq[2], aq[3]))
-    # (A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
-    scale, _ = exponent_scale(jax.lax.stop_gradient(big))
+    # (Elementwise maxima, not jnp.max: XLA:CPU splits a reduction into loops of its own.
+    # A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
+    scale, _ = exponent_scale(x, y, z, w)
+    big = max_abs_bits(x, y, z, w)  # the same integers (XLA computes them once)
     # The scale is applied to a, b, c, d (linear in q; a power of two, so exactly as if applied
     # to q): XLA:CPU then fuses it instead of writing a scaled copy of q.
     a, b, c, d = (scale * t for t in _abcd(x, y, z, w, seq))
@@ -235,7 +236,7 @@ def _factors(x, y, z, w, seq):
     locks = (lock_sum, lock_diff, 1 if intrinsic else -1)  # extrinsic keeps `first`
     # NaN for the zero quaternion rather than a valid-looking rotation, and for a NaN or
     # infinite component (the power-of-two scaling would otherwise zero the finite ones).
-    bad = (big == 0) | ~jnp.isfinite(big)  # big: NaN if a component is
+    bad = (big == 0) | (big >= float_bits(np.inf, x.dtype))  # NaN's bits are above inf's
     return scale, (a, b, c, d), _substitute((a, b, c, d), locks), locks, bad
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
@@ -15,7 +14,6 @@ from ._numerics import (
     check_shape,
     exponent_scale,
     from_scalar_last,
-    max_abs,
     public,
     stack,
     sum_squares,
@@ -44,7 +42,7 @@ def _prescaled_matrix(R, split=False):
     # Always the power of two, also for a rotation matrix (s = 1 or 2 there): every step below
     # is exact under it, and one less select keeps XLA:CPU's per-rotation scale function small
     # enough to be inlined into the vectorised loop in float64 too.
-    s, _ = exponent_scale(jax.lax.stop_gradient(max_abs(*r)))
+    s, _ = exponent_scale(*r)
     r = [x * s for x in r]
     f2 = sum_squares(r)
     return r, f2, (f2 > 0) & (f2 < jnp.inf), s
@@ -74,9 +72,9 @@ def selected_column(R):
 def shepperd_column(R):
     """The selected column of :func:`selected_column`, sign-flipped to ``w >= 0`` and not
     normalised: the quaternion of ``R`` at a norm between ``2 t`` and ``4 t`` for a rotation
-    (``t`` of order 1 after the prescaling), for a ``Rotation`` (which stores a quaternion at any norm and whose
-    readers prescale) or any consumer that does not need a unit quaternion. NaN for a
-    non-rotation, as the column."""
+    (``t`` of order 1 after the prescaling), for a ``Rotation`` (which stores a quaternion at
+    any norm and whose readers prescale) or any consumer that does not need a unit quaternion.
+    NaN for a non-rotation, as the column."""
     c, _ = selected_column(R)
     return stack([jnp.where(c[3] < 0, -x, x) for x in c])
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
@@ -14,7 +13,6 @@ from ._numerics import (
     check_shape,
     exponent_scale,
     from_scalar_last,
-    max_abs,
     public,
     select,
     stack,
@@ -98,7 +96,7 @@ def mrp_to_quaternion(mrp: ArrayLike, scalar_first: bool = False) -> Array:
     # Reciprocals by rsqrt (multiplications and additions: see its note; both arguments are
     # at least 1), so that the conversion stays one loop alone and composed.
     outer = sum_squares(p) > 1
-    s, _ = exponent_scale(jax.lax.stop_gradient(max_abs(*p)))
+    s, _ = exponent_scale(*p)
     u = [x * s for x in p]
     r = rsqrt(jnp.where(outer, sum_squares(u), 1.0))  # double where; |s p|^2 is in [1, 12)
     f = -s * (r * r)

@@ -22,7 +22,6 @@ from ._numerics import (
     check_shape,
     exponent_scale,
     from_scalar_last,
-    max_abs,
     public,
     recorded,
     stack,
@@ -59,8 +58,7 @@ def _prescaled_parts(q):
 
 def _prescale(parts):
     """:func:`_prescaled_parts` of a quaternion given by its four components."""
-    big = jax.lax.stop_gradient(max_abs(*parts))
-    s = jnp.where((big > 0) & (big < jnp.inf), unit_scale(big), jnp.nan)
+    s = unit_scale(*parts, mark=True)
     return [x * s for x in parts], s
 
 
@@ -71,7 +69,7 @@ def quat_rescaled(q):
     no NaN marking: a zero or non-finite ``q`` gives a zero or non-finite product, for which
     every reader (each prescales) gives NaN."""
     parts = unstack(q)
-    s, _ = exponent_scale(jax.lax.stop_gradient(max_abs(*parts)))
+    s, _ = exponent_scale(*parts)
     return stack([x * s for x in parts])
 
 
@@ -197,7 +195,7 @@ def quat_angle(q):
     w = jnp.abs(w)
     # |q_v| with q_v scaled on its own (a power of two), so that 1e-160 stays 1e-160 (atan2 is
     # a ratio, scale-free); the root as m2 rsqrt(m2), 0 with a zero gradient at q_v = 0.
-    s, inv = exponent_scale(jax.lax.stop_gradient(max_abs(x, y, z)))
+    s, inv = exponent_scale(x, y, z)
     m2 = sum_squares([x * s, y * s, z * s])
     zero = m2 == 0
     n = jnp.where(zero, 0.0, m2 * rsqrt(jnp.where(zero, 1.0, m2))) * inv

@@ -39,7 +39,6 @@ from ._numerics import (
     from_scalar_last,
     matmul,
     matvec,
-    max_abs,
     public,
     skew,
     to_scalar_last,
@@ -409,7 +408,7 @@ def quaternion_derivative_to_angular_velocity(
     # omega is homogeneous of degree 0 in (q, q_dot): both scaled by the power of two that
     # brings q's largest component into [0.5, 2) (exact; 1 for a unit q), so that |q|^2 can
     # neither underflow nor overflow.
-    s = unit_scale(max_abs(*(q[..., i] for i in range(4))))[..., None]
+    s = unit_scale(*(q[..., i] for i in range(4)))[..., None]
     q, qd = q * s, qd * s
     qc = quat_conjugate(q)
     prod = quat_multiply(qc, qd) if frame == "body" else quat_multiply(qd, qc)

@@ -52,7 +52,7 @@ CASES = {
         rj.quaternion_to_mrp, [(4,)], (1, BYTES_SLACK, 100), (1, BYTES_SLACK, 175)
     ),
     "quaternion_inverse": (
-        rj.quaternion_inverse, [(4,)], (1, BYTES_SLACK, 75), (1, BYTES_SLACK, 145)
+        rj.quaternion_inverse, [(4,)], (1, BYTES_SLACK, 80), (1, BYTES_SLACK, 145)
     ),
     "rotvec_to_quaternion": (
         rj.rotvec_to_quaternion, [(3,)], (1, BYTES_SLACK, 135), (1, BYTES_SLACK, 210)
