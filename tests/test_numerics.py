@@ -12,7 +12,7 @@ from hypothesis.extra.numpy import arrays
 import rotjax as rj
 from rotjax._elementary import reciprocal, rsqrt
 from rotjax._matrix import selected_column
-from rotjax._numerics import exponent_scale
+from rotjax._numerics import exponent_scale, max_abs_bits, unit_scale
 
 # Exponent ranges of normal numbers, and the documented accuracy of rsqrt: the Newton form's on
 # the CPU, XLA's rsqrt elsewhere (a GPU's float32 rsqrt is within 2 ulp, CUDA's rsqrtf).
@@ -112,6 +112,34 @@ def test_exponent_scale_is_exact_and_clamped(dtype):
     s, inv = (np.asarray(v) for v in exponent_scale(odd))
     assert np.all(np.isfinite(s) & (s > 0) & np.isfinite(inv) & (inv > 0))
     assert np.isinf(np.asarray(odd)[2] * s[2])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_scale_factors_of_several_components(dtype):
+    """The factors of four components read off the bits of their largest magnitude: the same
+    as of that magnitude as a float, for signed values, zeros, subnormals, infinities and NaN;
+    ``unit_scale`` is 1 in ``[0.5, 2)`` and, with ``mark``, NaN where every component is zero
+    or one is not finite (a non-rotation)."""
+    info = np.finfo(dtype)
+    special = [0.0, -0.0, info.smallest_subnormal, -info.tiny, 0.5, -1.9999, 2.0, info.max,
+               -np.inf, np.nan, 3e-3, -7.0]  # fmt: skip
+    rng = np.random.default_rng(5)
+    x = rng.choice(np.asarray(special, dtype), size=(4, 512))
+    x[:, :64] = 0.0  # whole quaternions of zeros
+    x[:, 64:128] *= rng.uniform(0.5, 1.0, (4, 64)).astype(dtype)
+    parts = [jnp.asarray(c) for c in x]
+    big = np.max(np.abs(x), axis=0)  # NaN where a component is
+    got = np.asarray(max_abs_bits(*parts)).view(dtype)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(big))
+    np.testing.assert_array_equal(got[~np.isnan(big)], big[~np.isnan(big)])
+    for a, b in zip(exponent_scale(*parts), exponent_scale(jnp.asarray(big)), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    s = np.asarray(unit_scale(*parts, mark=True))
+    bad = (big == 0) | ~np.isfinite(big)
+    assert np.isnan(s[bad]).all() and np.isfinite(s[~bad]).all()
+    unit = (big >= 0.5) & (big < 2)
+    np.testing.assert_array_equal(s[unit], 1.0)
+    np.testing.assert_array_equal(np.asarray(unit_scale(*parts))[~bad], s[~bad])
 
 
 def test_other_backends_use_xla_operations():
