@@ -316,7 +316,7 @@ def _top_matrix(B, q, aux, Q):
 @_top_matrix.defjvp
 def _top_matrix_jvp(primals, tangents):
     (B, q, aux, _), (dB, _, _, _) = primals, tangents
-    return jax.jvp(lambda b: quat_to_matrix(_top(b, q, aux)), (B,), (dB,))
+    return jax.jvp(lambda b: quat_to_matrix(_top(b, q, aux), bounded=True), (B,), (dB,))
 
 
 def nearest_rotation(B):
@@ -364,7 +364,7 @@ def _top_jvp(primals, tangents):
     v = _top(B, qe, aux)
     # Entries read by unstack (a slice's transpose is a pad, which XLA:CPU evaluates per
     # element in a branch of its own: minutes to compile at second order)
-    q_e, b_e, v_e = (unstack_matrix(X) for X in (quat_to_matrix(v), Bs, V))
+    q_e, b_e, v_e = (unstack_matrix(X) for X in (quat_to_matrix(v, bounded=True), Bs, V))
     db_e = tangent_entries(dBs)
 
     def qt(x, i, j):

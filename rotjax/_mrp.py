@@ -52,7 +52,13 @@ def quaternion_to_mrp(q: ArrayLike, scalar_first: bool = False) -> Array:
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     # Any finite scale: |q|^2 stays in range; NaN for the zero quaternion or a non-finite one.
-    return cast(scaled_vector_part(to_scalar_last(q, scalar_first), _mrp_scale, True), dt)
+    return cast(quat_to_mrp(to_scalar_last(q, scalar_first)), dt)
+
+
+def quat_to_mrp(q, bounded=False):
+    """The MRP of a scalar-last quaternion of any finite non-zero norm. ``bounded``: see
+    :func:`rotjax._quaternion._prescaled_parts`."""
+    return scaled_vector_part(q, _mrp_scale, True, bounded)
 
 
 def _mrp_scale(n2, w):

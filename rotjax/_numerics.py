@@ -135,7 +135,12 @@ def _exponent_scale(bits, dtype):
     return s, jax.lax.bitcast_convert_type(field, dtype)
 
 
-def exponent_scale(*xs):
+def _marked(bits, s, dtype):
+    """`s`, NaN where the magnitude `bits` are those of zero, infinity or NaN."""
+    return jnp.where((bits > 0) & (bits < float_bits(np.inf, dtype)), s, jnp.nan)
+
+
+def exponent_scale(*xs, mark=False):
     """`(s, 1 / s)`, powers of two with `s max|x|` in `[1, 2)` over the per-element arrays `xs`
     (finite, normal).
 
@@ -144,10 +149,13 @@ def exponent_scale(*xs):
     much as the rest of a conversion and keep XLA from fusing the scaling into its consumers).
     The exponent is clamped so that both factors stay normal: where every `x` is zero or
     subnormal, `s = 2^(emax-1)` and `s max|x|` lies in `[eps, 1)`; where one is infinite or
-    NaN, `s = 2^(emin)`, and it stays infinite or NaN. The factor is piecewise constant: no
-    derivative flows through it.
+    NaN, `s = 2^(emin)`, and it stays infinite or NaN; with `mark`, `s` is NaN there instead
+    (not a rotation). The factor is piecewise constant: no derivative flows through it.
     """
-    return _exponent_scale(max_abs_bits(*xs), xs[0].dtype)
+    dt = xs[0].dtype
+    bits = max_abs_bits(*xs)
+    s, inv = _exponent_scale(bits, dt)
+    return (_marked(bits, s, dt) if mark else s), inv
 
 
 def unit_scale(*xs, mark=False):
@@ -161,9 +169,7 @@ def unit_scale(*xs, mark=False):
     bits = max_abs_bits(*xs)
     s, _ = _exponent_scale(bits, dt)
     s = jnp.where((bits >= float_bits(0.5, dt)) & (bits < float_bits(2.0, dt)), jnp.ones_like(s), s)
-    if mark:
-        s = jnp.where((bits > 0) & (bits < float_bits(np.inf, dt)), s, jnp.nan)
-    return s
+    return _marked(bits, s, dt) if mark else s
 
 
 def select(cond, a, b, dtype):

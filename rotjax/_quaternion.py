@@ -47,29 +47,34 @@ def _prep2(p, q, scalar_first, names=("p", "q")):
     return to_scalar_last(p, scalar_first), to_scalar_last(q, scalar_first), dt
 
 
-def _prescaled_parts(q):
+def _prescaled_parts(q, bounded=False):
     """The four components of ``q`` (per-rotation arrays) times a power of two ``s`` that brings
     the largest into ``[0.5, 2)`` (exact; 1 for a unit quaternion), so that squared norms and
     products neither overflow nor underflow, and ``s``. ``s`` is NaN where ``q`` is zero or a
     component is infinite or NaN (not a rotation): the NaN is put into the scale, which XLA
-    applies inside the loop that reads ``q``, rather than into a copy of ``q``."""
-    return _prescale(unstack(q))
+    applies inside the loop that reads ``q``, rather than into a copy of ``q``.
+
+    ``bounded``: ``q`` is of order 1 (a unit quaternion, a product of :func:`quat_rescaled`
+    ones) or NaN where it is not a rotation, and is returned as it is (``s = 1``)."""
+    return _prescale(unstack(q), bounded)
 
 
-def _prescale(parts):
+def _prescale(parts, bounded=False):
     """:func:`_prescaled_parts` of a quaternion given by its four components."""
+    if bounded:
+        return list(parts), jnp.ones_like(parts[0])
     s = unit_scale(*parts, mark=True)
     return [x * s for x in parts], s
 
 
 def quat_rescaled(q):
     """``q`` times the exact power of two that brings its largest ``|component|`` into
-    ``[1, 2)``: for a product whose result is stored, not read (a composition), so that a
-    chain of them neither overflows nor underflows. Unlike :func:`quat_prescaled` there is
-    no NaN marking: a zero or non-finite ``q`` gives a zero or non-finite product, for which
-    every reader (each prescales) gives NaN."""
+    ``[1, 2)``, NaN where ``q`` is not a rotation (zero or not finite): for a product whose
+    result is stored, not read (a composition), so that a chain of them neither overflows nor
+    underflows. A product of such factors and unit ones has a norm in ``[1, 16)`` or is NaN:
+    its readers need no prescaling (``bounded``)."""
     parts = unstack(q)
-    s, _ = exponent_scale(*parts)
+    s, _ = exponent_scale(*parts, mark=True)
     return stack([x * s for x in parts])
 
 
@@ -79,17 +84,17 @@ def quat_prescaled(q):
     return stack(_prescaled_parts(q)[0])
 
 
-def scaled_vector_part(q, scale, with_w):
+def scaled_vector_part(q, scale, with_w, bounded=False):
     """``k q_v`` with ``k = scale(n2, w)`` a per-rotation function of the prescaled quaternion
     (see :func:`_prescaled_parts`), ``n2 = |q_v|^2`` (``|q|^2`` with ``with_w``): the
-    logarithm map and the MRP."""
-    return stack(scaled_vector_parts(tuple(unstack(q)), scale, with_w))
+    logarithm map and the MRP. ``bounded``: see :func:`_prescaled_parts`."""
+    return stack(scaled_vector_parts(tuple(unstack(q)), scale, with_w, bounded))
 
 
-def scaled_vector_parts(q, scale, with_w):
+def scaled_vector_parts(q, scale, with_w, bounded=False):
     """:func:`scaled_vector_part` on the four components of ``q``: the three components of
     ``k q_v``. JAX differentiates this code."""
-    (x, y, z, w), _ = _prescale(q)  # NaN for the zero quaternion or a non-finite one
+    (x, y, z, w), _ = _prescale(q, bounded)  # NaN for the zero quaternion or a non-finite one
     n2 = x * x + y * y + z * z + (w * w if with_w else 0)
     k = scale(n2, w)
     return k * x, k * y, k * z
@@ -114,10 +119,11 @@ def quat_conjugate(q):
     return stack([-x, -y, -z, w])
 
 
-def quat_normalize(q):
+def quat_normalize(q, bounded=False):
     """`q / |q|` for `q` at any finite scale (`quat_prescaled` first); NaN for the zero
-    quaternion (0/0, on purpose: it is not a rotation) and for a non-finite component."""
-    p, _ = _prescaled_parts(q)
+    quaternion (0/0, on purpose: it is not a rotation) and for a non-finite component.
+    ``bounded``: see :func:`_prescaled_parts`."""
+    p, _ = _prescaled_parts(q, bounded)
     r = rsqrt(sum_squares(p))
     return stack([x * r for x in p])
 
@@ -132,9 +138,10 @@ def quat_renormalize(q):
     return stack([x * r for x in p])
 
 
-def quat_to_matrix(q):
-    """Rotation matrix of a scalar-last quaternion of any non-zero norm."""
-    return quat_to_matrix_parts(*unstack(q), computed=recorded(q))
+def quat_to_matrix(q, bounded=False):
+    """Rotation matrix of a scalar-last quaternion of any finite non-zero norm (NaN for zero
+    or a non-finite component). ``bounded``: see :func:`_prescaled_parts`."""
+    return quat_to_matrix_parts(*_prescaled_parts(q, bounded)[0], computed=recorded(q))
 
 
 def quat_to_matrix_parts(x, y, z, w, computed=False):
@@ -188,10 +195,11 @@ def _homogeneous_matrix(x, y, z, w, reciprocal):
     return tuple(e for row in rows for e in row)
 
 
-def quat_angle(q):
+def quat_angle(q, bounded=False):
     """Rotation angle in [0, pi] of a scalar-last quaternion of any finite norm (NaN for zero
-    or a non-finite component)."""
-    (x, y, z, w), _ = _prescaled_parts(q)  # |w|, n of order 1: atan2's derivative is finite
+    or a non-finite component). ``bounded``: see :func:`_prescaled_parts`."""
+    # |w|, n of order 1: atan2's derivative is finite
+    (x, y, z, w), _ = _prescaled_parts(q, bounded)
     w = jnp.abs(w)
     # |q_v| with q_v scaled on its own (a power of two), so that 1e-160 stays 1e-160 (atan2 is
     # a ratio, scale-free); the root as m2 rsqrt(m2), 0 with a zero gradient at q_v = 0.
@@ -232,7 +240,7 @@ def quaternion_to_matrix(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return cast(quat_to_matrix_parts(*_prescaled_parts(q)[0], computed=recorded(q)), dt)
+    return cast(quat_to_matrix(q), dt)
 
 
 @public
@@ -361,7 +369,7 @@ def quaternion_apply(q: ArrayLike, v: ArrayLike, scalar_first: bool = False) -> 
     (q, v), dt = as_float(q, v)
     check_shape(q, (4,), "q")
     check_shape(v, (3,), "v")
-    return cast(_apply(to_scalar_last(q, scalar_first), v), dt)
+    return cast(quat_apply(to_scalar_last(q, scalar_first), v), dt)
 
 
 def quat_turn(p, v):
@@ -374,13 +382,14 @@ def quat_turn(p, v):
     return [w * t0 + (y * t2 - z * t1), w * t1 + (z * t0 - x * t2), w * t2 + (x * t1 - y * t0)]
 
 
-def _apply(q, v):
-    """``R(q) v`` for a scalar-last ``q`` of any finite non-zero norm (see quaternion_apply)."""
-    return stack(_apply_parts(tuple(unstack(q)), tuple(unstack(v))))
+def quat_apply(q, v, bounded=False):
+    """``R(q) v`` for a scalar-last ``q`` of any finite non-zero norm (see quaternion_apply).
+    ``bounded``: see :func:`_prescaled_parts`."""
+    return stack(_apply_parts(tuple(unstack(q)), tuple(unstack(v)), bounded))
 
 
-def _apply_parts(q, v):
-    p, _ = _prescale(q)
+def _apply_parts(q, v, bounded=False):
+    p, _ = _prescale(q, bounded)
     r = rsqrt(sum_squares(p))  # the unit quaternion, on per-rotation scalars
     d = quat_turn([x * r for x in p], v)
     return tuple(a + b for a, b in zip(v, d, strict=True))
@@ -477,4 +486,6 @@ def angle_between(p: ArrayLike, q: ArrayLike, scalar_first: bool = False) -> Arr
         ```
     """
     p, q, dt = _prep2(p, q, scalar_first)
-    return cast(quat_angle(quat_multiply(quat_conjugate(quat_prescaled(p)), quat_prescaled(q))), dt)
+    # prescaled factors (NaN where not a rotation): their product is of order 1, or NaN
+    rel = quat_multiply(quat_conjugate(quat_prescaled(p)), quat_prescaled(q))
+    return cast(quat_angle(rel, bounded=True), dt)

@@ -127,7 +127,7 @@ def _pose_apply(q, t, v, inverse):
         q, t = _pose_inv(q, t)
     if np.prod(q.shape[:-1]) < np.prod(v.shape[:-1]):
         # Fewer transforms than vectors: each matrix once, then 9 multiply-adds a vector.
-        r = quat_to_matrix(q)
+        r = quat_to_matrix(q, bounded=True)
         r, t, v = jnp.broadcast_to(r, batch + (3, 3)), *broadcast_batch(t, v)
         return matvec(r, v) + t
     q, t, v = broadcast_batch(q, t, v)

@@ -28,20 +28,31 @@ from ._euler import euler_to_quaternion, parse_seq, quaternion_to_euler
 from ._fitting import align_vectors as _align_vectors
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion, shepperd_column
-from ._mrp import mrp_to_quaternion, quaternion_to_mrp
-from ._numerics import broadcast_batch, check_array, check_static, cross, jit, to_scalar_last
+from ._mrp import mrp_to_quaternion, quat_to_mrp
+from ._numerics import (
+    as_float,
+    broadcast_batch,
+    cast,
+    check_array,
+    check_static,
+    cross,
+    jit,
+    to_scalar_last,
+)
 from ._quaternion import (
     angle_between,
+    quat_angle,
+    quat_apply,
     quat_multiply,
+    quat_normalize,
     quat_rescaled,
+    quat_to_matrix,
     quaternion_apply,
     quaternion_conjugate,
     quaternion_multiply,
     quaternion_normalize,
-    quaternion_to_matrix,
-    rotation_angle,
 )
-from ._rotvec import quaternion_to_rotvec, rotvec_to_quaternion
+from ._rotvec import quat_to_rotvec, rotvec_to_quaternion
 
 
 def float_array(x, dtype=None):
@@ -105,11 +116,21 @@ def _rotation_compose(p, q, rescale_p=True, rescale_q=True):
     return quat_multiply(quat_rescaled(p) if rescale_p else p, quat_rescaled(q) if rescale_q else q)
 
 
-@jit(static_argnames="inverse")
-def _rotation_apply(q, v, inverse):
+@jit(static_argnames=("inverse", "bounded"))
+def _rotation_apply(q, v, inverse, bounded):
     if inverse:
         q = quaternion_conjugate(q)
-    return quaternion_apply(*broadcast_batch(q, v, trailing=(1, 1)))
+    (q, v), dt = as_float(*broadcast_batch(q, v, trailing=(1, 1)))
+    return cast(quat_apply(q, v, bounded), dt)
+
+
+@jit(static_argnames=("read", "bounded", "degrees"))
+def _read(q, read, bounded, degrees=False):
+    """``read(q, bounded)``, a reader of the stored quaternion (``quat_to_matrix``, ...), in
+    its compute dtype; ``bounded``: the rotation's mark (the reader then skips its prescaling)."""
+    (q,), dt = as_float(q)
+    out = read(q, bounded)
+    return cast(jnp.rad2deg(out) if degrees else out, dt)
 
 
 def identity_quat(shape, dtype):
@@ -176,10 +197,12 @@ class BatchedPytree:
     def _leaves(self):
         return tuple(getattr(self, name) for name in self._LEAVES)
 
+    _bounded = False  # see Rotation
+
     @property
     def _quat(self):
         """The unit quaternion of the rotation, scalar last."""
-        return quaternion_normalize(self._stored)
+        return _read(self._stored, quat_normalize, self._bounded)
 
     def _exponent(self, n, modulus):
         """scipy's ``__pow__`` exponent: a scalar (or one-element array), broadcast to the
@@ -325,10 +348,12 @@ class Rotation(BatchedPytree):
     # to exactly quaternion_to_euler(q, seq); as_quat and the methods that need a unit
     # quaternion read the normalised ``_quat``. Nothing else is stored: the tree structure is
     # the same for every constructor, method and operator (a scan carry, both branches of a
-    # cond), and the value alone decides the result. ``_unit``, outside the tree (so lost, and
-    # False, once the object is flattened): the constructor stored a unit quaternion (to
-    # rounding), which a product need not rescale (``_rotation_compose``); it saves work only.
-    __slots__ = ("_stored", "_unit")
+    # cond), and the value alone decides the result. Two marks outside the tree (so lost, and
+    # False, once the object is flattened) save work only. ``_unit``: the constructor stored a
+    # unit quaternion (to rounding), which a product need not rescale (``_rotation_compose``).
+    # ``_bounded``: the quaternion is of order 1, or NaN where it is not a rotation (a unit
+    # one, a product, Shepperd's column), which the readers need not prescale.
+    __slots__ = ("_stored", "_unit", "_bounded")
     _LEAVES = ("_stored",)
     _NOUN = "rotation"
     # NumPy's operators defer to ours (``array * r`` is not an object-array product), and ours
@@ -353,29 +378,32 @@ class Rotation(BatchedPytree):
         if scalar_first:
             q = _scalar_last(q, scalar_first)
         self._stored = q
-        self._unit = False
+        self._unit = self._bounded = False
 
     @classmethod
-    def _raw(cls, quat, unit=False):
+    def _raw(cls, quat, unit=False, bounded=False):
         """A rotation holding the quaternion `quat` (any non-zero norm) as it is; `unit`: it
-        is a unit quaternion to rounding (or NaN), as computed by a conversion."""
+        is a unit quaternion to rounding (or NaN), as computed by a conversion; `bounded`: it
+        is of order 1 or NaN (a unit one included)."""
         r = object.__new__(cls)
         r._stored = quat
         r._unit = unit
+        r._bounded = unit or bounded
         return r
 
     def __setstate__(self, state):
         super().__setstate__(state)
-        self._unit = False
+        self._unit = self._bounded = False
 
     def __getitem__(self, indexer):
         r = super().__getitem__(indexer)
-        r._unit = self._unit
+        r._unit, r._bounded = self._unit, self._bounded
         return r
 
     def __setitem__(self, indexer, value):
         super().__setitem__(indexer, value)
         self._unit = self._unit and value._unit
+        self._bounded = self._bounded and value._bounded
 
     # --- shape ---------------------------------------------------------------------------
 
@@ -440,7 +468,7 @@ class Rotation(BatchedPytree):
         if m.size == 0:  # an empty batch (the nearest-rotation solver needs an element)
             return Rotation._raw(jnp.zeros(m.shape[:-2] + (4,), m.dtype))
         if assume_valid:  # not normalised: the readers prescale (and as_euler needs no norm)
-            return Rotation._raw(shepperd_column(m))
+            return Rotation._raw(shepperd_column(m), bounded=True)
         if isinstance(m, np.ndarray) and np.any(np.linalg.det(m) <= 0):
             raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
         return Rotation._raw(_from_matrix_checked(m), unit=True)
@@ -896,7 +924,7 @@ class Rotation(BatchedPytree):
             #  [ 0.  1. -0.]]
             ```
         """
-        return quaternion_to_matrix(self._stored)
+        return _read(self._stored, quat_to_matrix, self._bounded)
 
     def as_rotvec(self, degrees: bool = False) -> Array:
         """Rotation vectors `angle * axis` with the angle in `[0, pi]`.
@@ -915,7 +943,7 @@ class Rotation(BatchedPytree):
             # [  0. -30.   0.]
             ```
         """
-        return quaternion_to_rotvec(self._stored, degrees=degrees)
+        return _read(self._stored, quat_to_rotvec, self._bounded, degrees=degrees)
 
     def as_mrp(self) -> Array:
         """Modified Rodrigues parameters `axis * tan(angle / 4)`, norm at most 1.
@@ -931,7 +959,7 @@ class Rotation(BatchedPytree):
             # [0.       0.       0.414214]
             ```
         """
-        return quaternion_to_mrp(self._stored)
+        return _read(self._stored, quat_to_mrp, self._bounded)
 
     def as_euler(
         self, seq: str, degrees: bool = False, *, suppress_warnings: bool = False
@@ -1048,7 +1076,7 @@ class Rotation(BatchedPytree):
         stored = _rotation_compose(
             self._stored, other._stored, rescale_p=not self._unit, rescale_q=not other._unit
         )
-        return Rotation._raw(stored, unit=self._unit and other._unit)
+        return Rotation._raw(stored, unit=self._unit and other._unit, bounded=True)
 
     def __pow__(self, n: ArrayLike, modulus: None = None) -> Rotation:
         """Fractional power: `n` times the rotation angle about the same axis.
@@ -1090,7 +1118,8 @@ class Rotation(BatchedPytree):
             # 0.0
             ```
         """
-        return Rotation._raw(quaternion_conjugate(self._stored), unit=self._unit)
+        conj = quaternion_conjugate(self._stored)
+        return Rotation._raw(conj, unit=self._unit, bounded=self._bounded)
 
     def apply(self, vectors: ArrayLike, inverse: bool = False) -> Array:
         """Rotate vectors: `R @ v` (`R.T @ v` with `inverse`).
@@ -1123,7 +1152,7 @@ class Rotation(BatchedPytree):
             raise ValueError(
                 f"Cannot broadcast {self.shape} rotations to {v.shape[:-1]} vectors."
             ) from None
-        return _rotation_apply(self._stored, v, inverse=inverse)
+        return _rotation_apply(self._stored, v, inverse=inverse, bounded=self._bounded)
 
     def magnitude(self) -> Array:
         """Rotation angles in `[0, pi]`.
@@ -1139,7 +1168,7 @@ class Rotation(BatchedPytree):
             # [0.5 3. ]
             ```
         """
-        return rotation_angle(self._stored)
+        return _read(self._stored, quat_angle, self._bounded)
 
     def approx_equal(
         self, other: Rotation, atol: ArrayLike | None = None, degrees: bool = False

@@ -97,10 +97,11 @@ def rotvec_scale(n2, w):
     return (2 * sign) * inv_m * half
 
 
-def quat_to_rotvec(q):
+def quat_to_rotvec(q, bounded=False):
     """Logarithm map of a scalar-last quaternion of any finite non-zero norm; angle in
-    [0, pi] (see `rotvec_scale`): one vectorised loop, forward and reverse."""
-    return scaled_vector_part(q, rotvec_scale, False)
+    [0, pi] (see `rotvec_scale`): one vectorised loop, forward and reverse. ``bounded``: see
+    :func:`rotjax._quaternion._prescaled_parts`."""
+    return scaled_vector_part(q, rotvec_scale, False, bounded)
 
 
 @public
@@ -208,7 +209,7 @@ def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
     check_shape(v, (3,), "rotvec")
     if degrees:
         v = jnp.deg2rad(v)
-    return cast(quat_to_matrix(rotvec_to_quat(v)), dt)
+    return cast(quat_to_matrix(rotvec_to_quat(v), bounded=True), dt)
 
 
 @public

@@ -293,7 +293,7 @@ def test_nearest_rotation_is_the_matrix_of_nearest_quaternion(dtype):
     ).astype(dtype)
 
     def via_q(B):
-        return quat_to_matrix(nearest_quaternion(B))
+        return quat_to_matrix(nearest_quaternion(B), bounded=True)  # unit: as _eigen reads it
 
     # both in one program, and both tangents in one: the kernel's run is shared within each
     Q, Qq = jax.jit(lambda B: (nearest_rotation(B), via_q(B)))(B)

@@ -401,13 +401,12 @@ def test_jit_class_compiles_to_the_functions_program():
 
     q, v = jnp.asarray(Q), jnp.asarray(V)
     cls = jax.jit(lambda q, v: (Rotation.from_quat(q) * Rotation.from_quat(q[::-1])).apply(v))
-    # A product of the stored quaternions (any norm, rescaled by powers of two), stored as is.
-    from rotjax._quaternion import quat_multiply, quat_rescaled
+    # A product of the stored quaternions (any norm, rescaled by powers of two), stored as is
+    # and read without a prescaling (of order 1, or NaN).
+    from rotjax._quaternion import quat_apply, quat_multiply, quat_normalize, quat_rescaled
 
     fun = jax.jit(
-        lambda q, v: rotjax.quaternion_apply(
-            quat_multiply(quat_rescaled(q), quat_rescaled(q[::-1])), v
-        )
+        lambda q, v: quat_apply(quat_multiply(quat_rescaled(q), quat_rescaled(q[::-1])), v, True)
     )
     assert ops(cls, q, v) == ops(fun, q, v)
     # The readers take the quaternion as given (any norm): one conversion, no normalisation.
@@ -422,12 +421,13 @@ def test_jit_class_compiles_to_the_functions_program():
             lambda q: rotjax.quaternion_to_rotvec(rotjax.quaternion_conjugate(q)),
         ),
         (lambda q: Rotation.from_quat(q).apply(V), lambda q: rotjax.quaternion_apply(q, V)),
-        # as_quat normalises the stored quaternion, whatever built it (the tree holds no flag
-        # saying that it is unit already)
+        # as_quat normalises the stored quaternion, whatever built it; one that a conversion
+        # built (marked unit) without the prescaling
         (
             lambda q: Rotation.from_rotvec(q[:, :3]).as_quat(),
-            lambda q: rotjax.quaternion_normalize(rotjax.rotvec_to_quaternion(q[:, :3])),
+            lambda q: quat_normalize(rotjax.rotvec_to_quaternion(q[:, :3]), True),
         ),
+        (lambda q: Rotation.from_quat(q).as_quat(), rotjax.quaternion_normalize),
     ]
     for cls, fun in pairs:
         assert ops(jax.jit(cls), q) == ops(jax.jit(fun), q)
@@ -529,17 +529,22 @@ def test_unit_marked_products_have_true_gradients():
     """Products that skip the rescaling are differentiated by JAX like any other code: the
     derivative (forward and reverse, jitted) matches finite differences through a marked
     factor at a generic point, at the zero rotation vector and at 180 degrees, with a raw
-    factor off the unit sphere; and equals the gradient of the rescaled product."""
+    factor off the unit sphere, through the readers that skip the prescaling of a product; and
+    equals the gradient with no marks (both factors rescaled, the product prescaled)."""
     from helpers import check_grads
 
     v = jnp.asarray(V[:3])
     q = jnp.asarray(Q[:3] * 3.0)  # norms about 3: off SO(3)
 
+    def read(r):
+        parts = [r.apply(v), r.as_quat(), r.as_rotvec(), r.as_mrp(), r.magnitude()[:, None]]
+        return jnp.concatenate(parts + [r.as_matrix().reshape(-1, 9)], axis=-1)
+
     def f(a, q):
-        return (Rotation.from_rotvec(a) * Rotation.from_quat(q)).apply(v)
+        return read(Rotation.from_rotvec(a) * Rotation.from_quat(q))
 
     def f_rescaled(a, q):
-        return (_flattened(Rotation.from_rotvec(a)) * Rotation.from_quat(q)).apply(v)
+        return read(_flattened(_flattened(Rotation.from_rotvec(a)) * Rotation.from_quat(q)))
 
     a = jnp.array([[0.3, -0.2, 0.5], [0.0, 0.0, 0.0], [np.pi, 0.0, 0.0]])
     check_grads(f, (a, q), order=1)
@@ -548,6 +553,42 @@ def test_unit_marked_products_have_true_gradients():
     for x, y in zip(g, g_ref, strict=True):
         assert np.all(np.isfinite(x))
         np.testing.assert_allclose(x, y, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_products_of_non_rotations_read_nan(dtype):
+    """A product is read without a prescaling (``Rotation._bounded``): a zero, infinite or NaN
+    factor, raw or converted, on either side, makes its element NaN in every reader, after an
+    inverse and a further product too, and leaves the other elements alone."""
+    good = Q[:4].astype(dtype)
+    bad = good.copy()
+    bad[1], bad[2, 0], bad[3, 2] = 0.0, np.inf, np.nan
+    raw_good, raw_bad = Rotation.from_quat(jnp.asarray(good)), Rotation.from_quat(jnp.asarray(bad))
+    conv_bad = Rotation.from_rotvec(jnp.asarray(bad[:, :3]))  # NaN where bad[:, :3] is not finite
+    v = V[:4].astype(dtype)
+    readers = {
+        "as_quat": lambda r: r.as_quat(),
+        "as_matrix": lambda r: r.as_matrix().reshape(-1, 9),
+        "apply": lambda r: r.apply(v),
+        "magnitude": lambda r: r.magnitude()[:, None],
+        "as_rotvec": lambda r: r.as_rotvec(),
+        "as_mrp": lambda r: r.as_mrp(),
+        "as_euler": lambda r: r.as_euler("ZYX"),
+    }
+    products = {
+        "raw bad * raw": raw_bad * raw_good,
+        "raw * raw bad": raw_good * raw_bad,
+        "converted * raw bad": Rotation.from_euler("xyz", v) * raw_bad,
+        "converted bad * raw": conv_bad * raw_good,
+    }
+    for name, r in products.items():
+        assert r._bounded, name
+        for s in (r, r.inv(), r * r):
+            for what, read in readers.items():
+                out = np.asarray(read(s))
+                bad_rows = [1, 2, 3] if "converted bad" not in name else [2, 3]
+                assert np.isfinite(out[0]).all(), (name, what)
+                assert np.isnan(out[bad_rows]).all(), (name, what, out)
 
 
 @pytest.mark.slow
