@@ -108,7 +108,8 @@ def _as_matrix(q, t):
 @jit
 def _pose_compose(q1, t1, q2, t2):
     # Stored quaternions of any norm: q1 is normalised once, for the product and the rotated
-    # translation; q2 only rescaled (as Rotation composes), so the product is of order 1.
+    # translation; q2 only rescaled (as Rotation composes), so the product is of order 1, or
+    # NaN where either is not a rotation.
     q1, t1, q2, t2 = broadcast_batch(q1, t1, q2, t2)
     u1 = quat_normalize(q1)
     return quat_multiply(u1, quat_rescaled(q2)), t1 + _rotate(u1, t2)
@@ -315,14 +316,17 @@ class RigidTransform(BatchedPytree):
             if m.size and np.any(np.linalg.det(m[..., :3, :3]) <= 0):
                 raise ValueError("Non-positive determinant (left-handed or null coordinate frame)")
         self._stored, self._translation = _pose_from_matrix(m, normalize=bool(normalize))
+        self._bounded = False
 
     @classmethod
     def _raw(cls, quat, translation) -> RigidTransform:
         """A transform holding a quaternion (any non-zero norm) and a translation as they are
-        (no check)."""
+        (no check). Never marked bounded: reading a product without the prescaling measured
+        1.2x slower in float64 (pose compose then apply; 0.89x in float32)."""
         tf = object.__new__(cls)
         tf._stored = quat
         tf._translation = translation
+        tf._bounded = False
         return tf
 
     # --- parts -----------------------------------------------------------------------------

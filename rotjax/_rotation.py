@@ -188,16 +188,15 @@ class BatchedPytree:
     batch axis is scipy's sequence, and a single element (no batch axes) has no length, is not
     iterable and not subscriptable. A subclass defines `_LEAVES`, `_NOUN` and `_raw(*leaves)`;
     its first leaf `_stored` is the quaternion of the rotation (scalar last, any non-zero norm),
-    read normalised as `_quat`."""
+    read normalised as `_quat`. `_bounded`, a mark outside the tree that every constructor
+    sets: `_stored` is of order 1 or NaN (see `Rotation`), and `_quat` skips the prescaling."""
 
-    __slots__ = ()
+    __slots__ = ("_bounded",)
     _NOUN = "element"
     _LEAVES: tuple[str, ...] = ()
 
     def _leaves(self):
         return tuple(getattr(self, name) for name in self._LEAVES)
-
-    _bounded = False  # see Rotation
 
     @property
     def _quat(self):
@@ -231,6 +230,7 @@ class BatchedPytree:
     def __setstate__(self, state):
         for name, x in zip(self._LEAVES, state, strict=True):
             setattr(self, name, jnp.asarray(x))
+        self._bounded = False
 
     # --- shape and sequence ------------------------------------------------------------------
 
@@ -286,6 +286,7 @@ class BatchedPytree:
         for name, old, new in zip(self._LEAVES, self._leaves(), value._leaves(), strict=True):
             old = jnp.asarray(old)
             setattr(self, name, old.at[idx].set(jnp.asarray(new, old.dtype)))
+        self._bounded = self._bounded and value._bounded
 
     def __repr__(self) -> str:
         head = f"{type(self).__name__}.from_matrix("
@@ -353,7 +354,7 @@ class Rotation(BatchedPytree):
     # unit quaternion (to rounding), which a product need not rescale (``_rotation_compose``).
     # ``_bounded``: the quaternion is of order 1, or NaN where it is not a rotation (a unit
     # one, a product, Shepperd's column), which the readers need not prescale.
-    __slots__ = ("_stored", "_unit", "_bounded")
+    __slots__ = ("_stored", "_unit")
     _LEAVES = ("_stored",)
     _NOUN = "rotation"
     # NumPy's operators defer to ours (``array * r`` is not an object-array product), and ours
@@ -393,7 +394,7 @@ class Rotation(BatchedPytree):
 
     def __setstate__(self, state):
         super().__setstate__(state)
-        self._unit = self._bounded = False
+        self._unit = False
 
     def __getitem__(self, indexer):
         r = super().__getitem__(indexer)
@@ -403,7 +404,6 @@ class Rotation(BatchedPytree):
     def __setitem__(self, indexer, value):
         super().__setitem__(indexer, value)
         self._unit = self._unit and value._unit
-        self._bounded = self._bounded and value._bounded
 
     # --- shape ---------------------------------------------------------------------------
 
