@@ -16,7 +16,7 @@ from ._numerics import (
     as_float,
     cast,
     check_shape,
-    exponent_scale,
+    exponent_scale_of_bits,
     float_bits,
     from_scalar_last,
     max_abs_bits,
@@ -216,8 +216,8 @@ def _factors(x, y, z, w, seq):
     # products A conj(C) and A C below then cannot underflow, whatever the norm of q.
     # (Elementwise maxima, not jnp.max: XLA:CPU splits a reduction into loops of its own.
     # A piecewise-constant factor: no derivative flows through it, the angles are invariant.)
-    scale, _ = exponent_scale(x, y, z, w)
-    big = max_abs_bits(x, y, z, w)  # the same integers (XLA computes them once)
+    big = max_abs_bits(x, y, z, w)
+    scale, _ = exponent_scale_of_bits(big, x.dtype)
     # The scale is applied to a, b, c, d (linear in q; a power of two, so exactly as if applied
     # to q): XLA:CPU then fuses it instead of writing a scaled copy of q.
     a, b, c, d = (scale * t for t in _abcd(x, y, z, w, seq))

@@ -122,7 +122,9 @@ def float_bits(value, dtype):
     return int(np.asarray(value, dtype).view(ity))
 
 
-def _exponent_scale(bits, dtype):
+def exponent_scale_of_bits(bits, dtype):
+    """:func:`exponent_scale` of the magnitude bits :func:`max_abs_bits` returns, for a caller
+    that reads those bits too."""
     info = jnp.finfo(dtype)
     ity = bits.dtype
     mant = info.nmant
@@ -154,7 +156,7 @@ def exponent_scale(*xs, mark=False):
     """
     dt = xs[0].dtype
     bits = max_abs_bits(*xs)
-    s, inv = _exponent_scale(bits, dt)
+    s, inv = exponent_scale_of_bits(bits, dt)
     return (_marked(bits, s, dt) if mark else s), inv
 
 
@@ -167,7 +169,7 @@ def unit_scale(*xs, mark=False):
     flows through it (the functions scaled by it do not depend on the scale)."""
     dt = xs[0].dtype
     bits = max_abs_bits(*xs)
-    s, _ = _exponent_scale(bits, dt)
+    s, _ = exponent_scale_of_bits(bits, dt)
     s = jnp.where((bits >= float_bits(0.5, dt)) & (bits < float_bits(2.0, dt)), jnp.ones_like(s), s)
     return _marked(bits, s, dt) if mark else s
 
