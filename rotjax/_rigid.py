@@ -21,7 +21,7 @@ from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
 from ._numerics import (
     broadcast_batch,
-    cross,
+    det3,
     jit,
     matvec,
     max_abs,
@@ -90,12 +90,14 @@ def _pose_from_matrix(m, normalize):
         return jnp.zeros(r.shape[:-2] + (4,), r.dtype), t
     if not normalize:
         return matrix_to_quaternion(r), t
-    q = matrix_to_quaternion(r, method="optimal")
-    det = jnp.sum(r[..., 0, :] * cross(r[..., 1, :], r[..., 2, :]), axis=-1)
-    row = m[..., 3, :]
-    ok = (det > 0) & (row[..., 0] == 0) & (row[..., 1] == 0) & (row[..., 2] == 0)
-    ok = (ok & (row[..., 3] == 1))[..., None]
-    return jnp.where(ok, q, jnp.nan), jnp.where(ok, t, jnp.nan)
+    det = det3([*e[0:3], *e[4:7], *e[8:11]])
+    ok = (det > 0) & (e[12] == 0) & (e[13] == 0) & (e[14] == 0) & (e[15] == 1)
+    # The mask on the inputs (the projection of NaN is NaN): in reverse mode it then masks the
+    # cotangent once, where it is written, rather than inside each loop of the projection's
+    # derivative, which recomputed the determinant in each.
+    e = [jnp.where(ok, x, jnp.nan) for x in e[:12]]
+    r = stack_matrix([e[0:3], e[4:7], e[8:11]])
+    return matrix_to_quaternion(r, method="optimal"), stack([e[3], e[7], e[11]])
 
 
 @jit

@@ -36,8 +36,10 @@ from ._numerics import (
     check_array,
     check_static,
     cross,
+    det3,
     jit,
     to_scalar_last,
+    unstack_matrix,
 )
 from ._quaternion import (
     angle_between,
@@ -96,8 +98,7 @@ def constructor_input(x):
 def _from_matrix_checked(matrix):
     # scipy raises for det <= 0; a traced function cannot, so those rotations are NaN.
     q = matrix_to_quaternion(matrix, method="optimal")
-    det = jnp.sum(matrix[..., 0, :] * cross(matrix[..., 1, :], matrix[..., 2, :]), axis=-1)
-    return jnp.where((det > 0)[..., None], q, jnp.nan)
+    return jnp.where((det3(unstack_matrix(matrix)) > 0)[..., None], q, jnp.nan)
 
 
 @jit(static_argnames="scalar_first")
