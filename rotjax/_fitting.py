@@ -9,7 +9,6 @@ the top eigenvalue is simple, finite at ties).
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
@@ -30,7 +29,7 @@ from ._numerics import (
     broadcast_batch,
     cast,
     check_shape,
-    cross,
+    exponent_scale,
     from_scalar_last,
     like_rank,
     matmul,
@@ -38,6 +37,7 @@ from ._numerics import (
     safe_norm,
     stack_matrix,
     to_scalar_last,
+    unstack,
     unstack_matrix,
 )
 from ._quaternion import quat_conjugate, quat_multiply, quat_normalize
@@ -196,9 +196,11 @@ def sixd_to_matrix(x: ArrayLike) -> Array:
             `b2 = normalise(a2 - (b1 . a2) b1)` and `b3 = b1 x b2`.
 
     Note:
-        Defined and smooth wherever `a1 != 0` and `a2` is not parallel to `a1`; there it
-        is undefined and returns NaN on purpose (no rotation is closer than any other), as
-        for an infinite or NaN component. The two halves are prescaled by exact powers of
+        Defined and smooth wherever `a1 != 0` and `a2` is not parallel to `a1`. It returns
+        NaN where `a1` or `a2` is zero, where `a2`'s residual after removing its `a1` part
+        rounds to exactly zero, and for an infinite or NaN component: no rotation is closer
+        than any other. (`a2` parallel to `a1` up to rounding leaves a residual of rounding
+        errors, whose direction the second column then follows.) The two halves are prescaled by exact powers of
         two, so any finite non-zero scale of either gives the same matrix (float32 from 1e-30
         to 1e30, float64 from 1e-300 to 1e300), with finite gradients.
         The map is surjective and continuous, unlike quaternions or Euler angles read as
@@ -217,29 +219,34 @@ def sixd_to_matrix(x: ArrayLike) -> Array:
     """
     (x,), dt = as_float(x)
     check_shape(x, (6,), "x")
-    a1, a2 = _pow2_prescale(x[..., :3]), _pow2_prescale(x[..., 3:])
-    b1 = a1 / jnp.sqrt(jnp.sum(a1 * a1, axis=-1, keepdims=True))
-    u2 = _pow2_prescale(a2 - jnp.sum(b1 * a2, axis=-1, keepdims=True) * b1)
-    b2 = u2 / jnp.sqrt(jnp.sum(u2 * u2, axis=-1, keepdims=True))
-    return cast(jnp.stack([b1, b2, cross(b1, b2)], axis=-1), dt)
+    x = unstack(x)
+    b1 = _unit(x[:3])
+    a2 = _direction_scaled(x[3:])
+    dot = sum(b * a for b, a in zip(b1, a2, strict=True))
+    b2 = _unit([a - dot * b for a, b in zip(a2, b1, strict=True)])
+    b3 = [
+        b1[1] * b2[2] - b1[2] * b2[1],
+        b1[2] * b2[0] - b1[0] * b2[2],
+        b1[0] * b2[1] - b1[1] * b2[0],
+    ]
+    return cast(stack_matrix([[b1[i], b2[i], b3[i]] for i in range(3)]), dt)
 
 
-def _pow2_prescale(v):
-    """`v` (`(..., 3)`) times the power of two that brings its largest component into
-    `[1/2, 1)`: exact (no rounding, unless a much smaller component becomes subnormal, which
-    is below eps relative to the largest), so its square norm neither overflows nor underflows.
+def _direction_scaled(v, mark=False):
+    """The components of `v` times the exact power of two that brings the largest into
+    `[1, 2)`: their squares and products then neither overflow nor underflow. Used for
+    directions, which do not depend on the factor (it carries no derivative). `mark`: NaN for
+    a zero, infinite or NaN `v`."""
+    s, _ = exponent_scale(*v, mark=mark)
+    return [x * s for x in v]
 
-    Applied to vectors that are only used through their direction (`b = v / |v|` is
-    homogeneous of degree 0 in `v`), the scale's own derivative contributes nothing
-    (`b'(v) v = 0`): it is held constant. Zero, infinite and NaN vectors are left as they
-    are (and give NaN downstream, as they must)."""
-    big = jax.lax.stop_gradient(jnp.max(jnp.abs(v), axis=-1, keepdims=True))
-    finite = jnp.isfinite(big) & (big > 0)
-    _, e = jnp.frexp(jnp.where(finite, big, 1.0))
-    # 2^-e in two factors: one alone would overflow for a subnormal `big` in float32.
-    half = -e // 2
-    one = jnp.ones((), v.dtype)
-    return v * jnp.ldexp(one, half) * jnp.ldexp(one, -e - half)
+
+def _unit(v):
+    """`v / |v|` for three components at any finite non-zero scale; NaN for a zero, infinite
+    or NaN `v`."""
+    v = _direction_scaled(v, mark=True)
+    n = jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return [x / n for x in v]
 
 
 @public
