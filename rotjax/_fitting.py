@@ -200,9 +200,9 @@ def sixd_to_matrix(x: ArrayLike) -> Array:
         NaN where `a1` or `a2` is zero, where `a2`'s residual after removing its `a1` part
         rounds to exactly zero, and for an infinite or NaN component: no rotation is closer
         than any other. (`a2` parallel to `a1` up to rounding leaves a residual of rounding
-        errors, whose direction the second column then follows.) The two halves are prescaled by exact powers of
-        two, so any finite non-zero scale of either gives the same matrix (float32 from 1e-30
-        to 1e30, float64 from 1e-300 to 1e300), with finite gradients.
+        errors, whose direction the second column then follows.) The two halves are prescaled
+        by exact powers of two, so any finite non-zero scale of either gives the same matrix
+        (float32 from 1e-30 to 1e30, float64 from 1e-300 to 1e300), with finite gradients.
         The map is surjective and continuous, unlike quaternions or Euler angles read as
         network outputs, which is why it regresses better.
 
