@@ -23,22 +23,13 @@ from ._shepperd import entries, k4_columns, select_column
 METHODS = ("shepperd", "markley", "optimal")
 
 
-def _prescaled_matrix(R, split=False):
+def _prescaled_matrix(R):
     """The nine entries of ``R`` (row by row) times a power of two ``s`` that brings the largest
     into ``[1, 2)`` (exact), so that no product below overflows or
     underflows; their squared Frobenius norm; whether ``R`` is a candidate rotation (not zero,
     every entry finite); and ``s``. Per-rotation scalars: XLA:CPU applies the scale inside the
-    one loop that reads ``R`` (a scaled copy of ``R`` would be a loop of its own).
-
-    ``split``: read the entries with one ``jnp.split`` instead of nine slices, for code that JAX
-    differentiates itself (``"markley"``): the transpose of nine slices is nine pads of the
-    whole cotangent, which XLA:CPU evaluated at every entry (seconds per call at 2^14)."""
-    if isinstance(R, (list, tuple)):  # the entries already
-        r = list(R)
-    elif split:
-        r = [x[..., 0] for x in jnp.split(R.reshape(*R.shape[:-2], 9), 9, -1)]
-    else:
-        r = entries(R)
+    one loop that reads ``R`` (a scaled copy of ``R`` would be a loop of its own)."""
+    r = list(R) if isinstance(R, (list, tuple)) else entries(R)  # or the entries already
     # Always the power of two, also for a rotation matrix (s = 1 or 2 there): every step below
     # is exact under it, and one less select keeps XLA:CPU's per-rotation scale function small
     # enough to be inlined into the vectorised loop in float64 too.
@@ -48,7 +39,7 @@ def _prescaled_matrix(R, split=False):
     return r, f2, (f2 > 0) & (f2 < jnp.inf), s
 
 
-def _homogeneous_k(R, split=False):
+def _homogeneous_k(R):
     """The columns and diagonal of the homogeneous ``K`` (see
     :func:`rotjax._shepperd.k4_columns`) of the prescaled ``R``, with ``t = |R|_F / sqrt(3)``
     (1 for a rotation matrix, ``s`` for ``s`` times one) on the diagonal, and the scalars of
@@ -56,7 +47,7 @@ def _homogeneous_k(R, split=False):
     is NaN for a zero or non-finite ``R``, and so is every column
     :func:`rotjax._shepperd.select_column` returns (the NaN is put into the scale, not into a
     copy of ``R``)."""
-    r, f2, ok, s = _prescaled_matrix(R, split)
+    r, f2, ok, s = _prescaled_matrix(R)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
     y = rsqrt(h)
     cols, diag = k4_columns(r, jnp.where(ok, h * y, jnp.nan))
@@ -122,7 +113,7 @@ def _markley(R):
     expressions throughout, as in `_shepperd` (the Shepperd quaternion is not stacked
     and unstacked in between: that cost a transposing loop).
     """
-    cols, diag, _ = _homogeneous_k(R, split=True)
+    cols, diag, _ = _homogeneous_k(R)
     c, sq = select_column(cols, diag)
     s0 = _hemisphere_scale(c, sq)
     v = _k_times(cols, [x * s0 for x in c])

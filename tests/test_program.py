@@ -33,6 +33,10 @@ CASES = {
     "matrix_to_quaternion": (
         rj.matrix_to_quaternion, [(3, 3)], (1, BYTES_SLACK, 180), (1, BYTES_SLACK, 470)
     ),
+    "matrix_to_quaternion_markley": (
+        lambda R: rj.matrix_to_quaternion(R, method="markley"), [(3, 3)], (1, BYTES_SLACK, 270),
+        (1, BYTES_SLACK, 680),
+    ),
     "matrix_to_euler": (
         lambda R: rj.matrix_to_euler(R, SEQ), [(3, 3)], (1, BYTES_SLACK, 575), (1, BYTES_SLACK, 780)
     ),
@@ -194,6 +198,8 @@ for name, (f, shapes, _, _) in T.CASES.items():
 NOT_FULL_WIDTH = {
     ("matrix_to_quaternion", "gradient", "float32"): 1,
     ("matrix_to_quaternion", "gradient", "float64"): 1,
+    ("matrix_to_quaternion_markley", "gradient", "float32"): 1,
+    ("matrix_to_quaternion_markley", "gradient", "float64"): 1,
     ("matrix_to_euler", "gradient", "float32"): 1,
     ("matrix_to_euler", "gradient", "float64"): 1,
     ("euler_to_matrix", "forward", "float32"): 1,
