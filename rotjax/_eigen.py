@@ -32,6 +32,8 @@ import jax.numpy as jnp
 from ._elementary import rsqrt, rsqrt_shared
 from ._numerics import (
     TIE_ULPS,
+    cross3,
+    dot3,
     eps,
     exponent_scale,
     max_abs,
@@ -143,18 +145,10 @@ def _rotation(app, aqq, apq):
     return c, t * c
 
 
-def _dot3(x, y):
-    return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
-
-
-def _cross3(x, y):
-    return [x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]]
-
-
 def _unit_or(w, fallback):
     """`w / |w|`, or `fallback` where `|w|^2` is zero or below the normal range, whose
     reciprocal could overflow (NaN there for `fallback=None`)."""
-    n = _dot3(w, w)
+    n = dot3(w, w)
     ok = n >= jnp.finfo(n.dtype).tiny  # NaN is not
     inv = rsqrt_shared(jnp.where(ok, n, 1.0))
     if fallback is None:
@@ -174,7 +168,7 @@ def _perpendicular(u):
         jnp.where(k0, u[2], jnp.where(k1, zero, -u[0])),
         jnp.where(k0, -u[1], jnp.where(k1, u[0], zero)),
     ]
-    inv = rsqrt_shared(_dot3(p, p))
+    inv = rsqrt_shared(dot3(p, p))
     return [x * inv for x in p]
 
 
@@ -211,7 +205,7 @@ def _polar(B, nan_at_zero=True):
     # the rotations keep its Frobenius norm.
     ua = _unit_or(wa, None if nan_at_zero else va)
     ub = _unit_or(wb, _perpendicular(ua))  # rank 1: any rotation taking v_a to u_a
-    uc, vc = _cross3(ua, ub), _cross3(va, vb)
+    uc, vc = cross3(ua, ub), cross3(va, vb)
     q_entries = [
         [ua[i] * va[j] + ub[i] * vb[j] + uc[i] * vc[j] for j in range(3)] for i in range(3)
     ]
@@ -228,7 +222,7 @@ def _polar(B, nan_at_zero=True):
     inv = rsqrt(n)
     k = jnp.where(flip, -inv, inv)
     q = jnp.moveaxis(jnp.stack(c, axis=0) * k[None], 0, -1)  # one transposing loop, as before
-    s = jnp.stack([_dot3(ua, wa), _dot3(ub, wb), _dot3(uc, wc)], axis=-1)
+    s = jnp.stack([dot3(ua, wa), dot3(ub, wb), dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)
 
 
@@ -385,7 +379,7 @@ def _top_jvp(primals, tangents):
     v_cols = [[v_e[3 * i + j] for i in range(3)] for j in range(3)]
 
     def Y(x):
-        c = [inv_g[j] * _dot3(v_cols[j], x) for j in range(3)]
+        c = [inv_g[j] * dot3(v_cols[j], x) for j in range(3)]
         return [sum(c[j] * v_cols[j][i] for j in range(3)) for i in range(3)]
 
     def A(x):  # tr(H) I - (H + H^T) / 2

@@ -21,7 +21,7 @@ from ._eigen import (
     pow2_scale,
     top_eigenvector,
 )
-from ._elementary import atan2
+from ._elementary import atan2, rsqrt
 from ._numerics import (
     FULL,
     as_float,
@@ -29,6 +29,8 @@ from ._numerics import (
     broadcast_batch,
     cast,
     check_shape,
+    cross3,
+    dot3,
     exponent_scale,
     from_scalar_last,
     like_rank,
@@ -222,13 +224,9 @@ def sixd_to_matrix(x: ArrayLike) -> Array:
     x = unstack(x)
     b1 = _unit(x[:3])
     a2 = _direction_scaled(x[3:])
-    dot = sum(b * a for b, a in zip(b1, a2, strict=True))
+    dot = dot3(b1, a2)
     b2 = _unit([a - dot * b for a, b in zip(a2, b1, strict=True)])
-    b3 = [
-        b1[1] * b2[2] - b1[2] * b2[1],
-        b1[2] * b2[0] - b1[0] * b2[2],
-        b1[0] * b2[1] - b1[1] * b2[0],
-    ]
+    b3 = cross3(b1, b2)
     return cast(stack_matrix([[b1[i], b2[i], b3[i]] for i in range(3)]), dt)
 
 
@@ -245,8 +243,8 @@ def _unit(v):
     """`v / |v|` for three components at any finite non-zero scale; NaN for a zero, infinite
     or NaN `v`."""
     v = _direction_scaled(v, mark=True)
-    n = jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    return [x / n for x in v]
+    inv = rsqrt(dot3(v, v))  # in [1, 12) after the scaling: rsqrt's domain
+    return [x * inv for x in v]
 
 
 @public

@@ -324,14 +324,6 @@ def tangent_entries(x):
     return _components(_flat(x))
 
 
-def tangent_stack(parts):
-    """The ``(..., k)`` tangent that a hand-written rule returns, from ``k`` per-rotation parts:
-    a concatenate, whose transpose (reverse mode) reads each part's cotangent by a slice that
-    fuses into its consumer. (:func:`stack`'s select transposes to a reduction per part, each a
-    loop of its own that recomputes the cotangent: 2x the projection's gradient.)"""
-    return jnp.stack(parts, axis=-1)
-
-
 def _flat(R):
     return R.reshape(*R.shape[:-2], R.shape[-2] * R.shape[-1])
 
@@ -371,15 +363,22 @@ def cross(a, b):
     return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
+def dot3(x, y):
+    """The dot product of two 3-vectors given by their components (per-rotation arrays)."""
+    return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+
+
+def cross3(x, y):
+    """The cross product of two 3-vectors given by their components, as components (the
+    stacked :func:`cross` reads and writes a trailing axis)."""
+    return [x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]]
+
+
 def det3(e):
     """The determinant of a 3x3 matrix from its nine entries (row by row, per-rotation arrays,
-    as :func:`unstack_matrix` reads them): a sum over a stacked axis is a loop of its own on
-    XLA:CPU, and in reverse mode it made a projecting constructor's gradient 2x slower."""
-    return (
-        e[0] * (e[4] * e[8] - e[5] * e[7])
-        + e[1] * (e[5] * e[6] - e[3] * e[8])
-        + e[2] * (e[3] * e[7] - e[4] * e[6])
-    )
+    as :func:`unstack_matrix` reads them), without a sum over a stacked axis (a loop of its own
+    on XLA:CPU)."""
+    return dot3(e[0:3], cross3(e[3:6], e[6:9]))
 
 
 def skew(v):

@@ -84,20 +84,18 @@ def _pose_from_matrix(m, normalize):
     # The entries read as unstack reads (a slice's transpose in reverse mode is a pad,
     # evaluated per element in a branch of its own).
     e = unstack_matrix(m)
+    if normalize:
+        ok = det3([*e[0:3], *e[4:7], *e[8:11]]) > 0
+        ok = ok & (e[12] == 0) & (e[13] == 0) & (e[14] == 0) & (e[15] == 1)
+        # The mask on the inputs (the projection of NaN is NaN): in reverse mode it then masks
+        # the cotangent once, where it is written, rather than inside each loop of the
+        # projection's derivative, which recomputed the determinant in each.
+        e = [jnp.where(ok, x, jnp.nan) for x in e]
     r = stack_matrix([e[0:3], e[4:7], e[8:11]])
     t = stack([e[3], e[7], e[11]])
     if r.size == 0:  # an empty batch (the eigen kernel cannot reshape one)
         return jnp.zeros(r.shape[:-2] + (4,), r.dtype), t
-    if not normalize:
-        return matrix_to_quaternion(r), t
-    det = det3([*e[0:3], *e[4:7], *e[8:11]])
-    ok = (det > 0) & (e[12] == 0) & (e[13] == 0) & (e[14] == 0) & (e[15] == 1)
-    # The mask on the inputs (the projection of NaN is NaN): in reverse mode it then masks the
-    # cotangent once, where it is written, rather than inside each loop of the projection's
-    # derivative, which recomputed the determinant in each.
-    e = [jnp.where(ok, x, jnp.nan) for x in e[:12]]
-    r = stack_matrix([e[0:3], e[4:7], e[8:11]])
-    return matrix_to_quaternion(r, method="optimal"), stack([e[3], e[7], e[11]])
+    return matrix_to_quaternion(r, method="optimal" if normalize else "shepperd"), t
 
 
 @jit

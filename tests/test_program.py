@@ -67,6 +67,9 @@ CASES = {
     "rotvec_to_matrix": (
         rj.rotvec_to_matrix, [(3,)], (1, BYTES_SLACK, 270), (1, BYTES_SLACK, 360)
     ),
+    "sixd_to_matrix": (
+        rj.sixd_to_matrix, [(6,)], (1, BYTES_SLACK, 240), (1, BYTES_SLACK, 340)
+    ),
 }  # fmt: skip
 
 _FUSION = re.compile(r"^\s*(?:ROOT\s+)?\S+ = \S+ fusion\(", re.MULTILINE)
@@ -206,6 +209,8 @@ NOT_FULL_WIDTH = {
     ("euler_to_matrix", "forward", "float64"): 1,
     ("rotvec_to_matrix", "forward", "float32"): 1,
     ("rotvec_to_matrix", "forward", "float64"): 1,
+    ("sixd_to_matrix", "forward", "float32"): 1,
+    ("sixd_to_matrix", "forward", "float64"): 1,
 }
 
 _ARITHMETIC = r"= (?:fadd|fsub|fmul|fdiv|fneg|fcmp \w+) (?:\w+ )*"

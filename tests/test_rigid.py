@@ -12,6 +12,7 @@ import pytest
 from helpers import (
     assert_close,
     assert_same_rotation,
+    check_grads,
     check_hessian,
     hessian_rows,
     jacobian_rows,
@@ -535,3 +536,39 @@ def test_dual_quat_normalization_at_any_scale(scale):
     assert_close(
         Tf.from_dual_quat(dq * scale).as_matrix(), SciTf.from_dual_quat(dq).as_matrix(), atol=1e-14
     )
+
+
+def _projected_log(m):
+    return Tf.from_matrix(m).as_exp_coords()
+
+
+def _projected_log_of_top(top):
+    """``_projected_log`` of ``[[top], [0, 0, 0, 1]]``: every other last row gives NaN, so the
+    finite differences move the top 3x4 block only."""
+    row = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], top.dtype), (*top.shape[:-2], 1, 4))
+    return _projected_log(jnp.concatenate([top, row], axis=-2))
+
+
+def test_projecting_from_matrix_gradient_is_the_derivative():
+    """The derivative of ``from_matrix(T).as_exp_coords()`` (the projection onto SO(3), then
+    the logarithm) in every direction of the top 3x4 block, against finite differences, forward
+    and reverse, in one batch: on SO(3) (a generic pose, the identity, a half turn) and off it
+    (a noisy block, and a scaled one). An element with a last row other than [0, 0, 0, 1] is
+    NaN, and its gradient 0, not NaN, without touching the others."""
+    rng = np.random.default_rng(7)
+    R = rj.rotvec_to_matrix(np.array([[0.3, -0.5, 0.9], [0.0, 0.0, 0.0], [0.0, 0.0, 3.0]]))
+    blocks = np.concatenate(
+        [np.asarray(R), np.asarray(R[:1]) + 0.05 * rng.normal(size=(1, 3, 3)), 2.5 * R[:1]]
+    )
+    m = np.zeros((len(blocks), 4, 4))
+    m[:, :3, :3] = blocks
+    m[:, :3, 3] = rng.normal(size=(len(blocks), 3))
+    m[:, 3, 3] = 1.0
+    top = jnp.asarray(m[:, :3])
+    check_grads(_projected_log_of_top, (top,), order=1, modes=("fwd", "rev"), atol=1e-6)
+    bad = m.copy()
+    bad[0, 3, 0] = 1.0
+    out = np.asarray(_projected_log(jnp.asarray(bad)))
+    grad = np.asarray(jax.grad(lambda x: jnp.sum(_projected_log(x)[1:]))(jnp.asarray(bad)))
+    assert np.all(np.isnan(out[0])) and np.all(np.isfinite(out[1:]))
+    assert np.all(np.isfinite(grad)) and np.all(grad[0] == 0) and np.any(grad[1:] != 0)
