@@ -99,12 +99,15 @@ def pow2_factors(x, axes):
     # The factors are constants (the derivative is x's times them): no tangent is traced.
     flat = jax.lax.stop_gradient(x).reshape(*x.shape[: x.ndim - n], -1)
     if flat.shape[-1] <= UNROLL_MAX:
-        # Elementwise maxima fuse with their neighbours and keep NaN (a max reduction over a
-        # small axis is a loop of its own; with NaN made infinite first, a slow one).
-        m = max_abs(*(flat[..., i] for i in range(flat.shape[-1])))
-    else:
-        m = jnp.max(jnp.where(jnp.isnan(flat), jnp.inf, jnp.abs(flat)), axis=-1)
-    return _pow2_factors(m)
+        return entry_pow2_factors([flat[..., i] for i in range(flat.shape[-1])])
+    return _pow2_factors(jnp.max(jnp.where(jnp.isnan(flat), jnp.inf, jnp.abs(flat)), axis=-1))
+
+
+def entry_pow2_factors(entries):
+    """:func:`pow2_factors` of batch elements given by their entries (per-rotation arrays):
+    elementwise maxima, which fuse with their neighbours and keep NaN (a max reduction over a
+    small axis is a loop of its own; with NaN made infinite first, a slow one)."""
+    return _pow2_factors(max_abs(*(jax.lax.stop_gradient(x) for x in entries)))
 
 
 def pow2_scale(x, axes):
@@ -279,9 +282,24 @@ def _check(K):
 @jax.custom_jvp
 def _top(B, q, aux):
     """`q`, the top eigenvector of `davenport_k(B)` computed by the caller with `aux`, the
-    kernel's `(V, s)` for `B`, differentiated as that function of `B`."""
+    kernel's `(V, s)` for `B`, differentiated as that function of `B`. For a `B` summed over a
+    set (the fitting problems): in reverse mode the cotangent of the stacked `B` is written
+    once, in one loop, and the sum's transpose reads it (each entry's cotangent, left an
+    expression, was computed again in a loop of its own per entry)."""
     del B, aux
     return q
+
+
+@jax.custom_jvp
+def _top_parts(b, q, aux):
+    """`_top` on components: `b` the nine entries of `B` and `q` the four of the kernel's
+    eigenvector (per-rotation arrays, see `rotjax._numerics.unstack`), returned with
+    per-rotation tangents, which the caller's loop reads as they are. For a `B` read from memory
+    (the conversions): a stacked tangent, read back by the caller, was transposed in reverse
+    mode into a select and a reduction per component, each a loop that computed the whole
+    incoming cotangent again."""
+    del b, aux
+    return tuple(q)
 
 
 def _run(B, nan_at_zero=True):
@@ -293,24 +311,31 @@ def _run(B, nan_at_zero=True):
     return _by_chunks(polar, jax.lax.stop_gradient(B))
 
 
-def _nearest(B, nan_at_zero=True):
-    """The kernel's top eigenvector of `davenport_k(B)`, differentiable (`_top_jvp`)."""
+def _nearest(B, nan_at_zero=True, summed=False):
+    """The kernel's top eigenvector of `davenport_k(B)`, differentiable (`_top_jvp`);
+    `summed`: `B` is a sum over a set (see `_top`), else read from memory (`_top_parts`)."""
     q, _, aux = _run(B, nan_at_zero)
-    return _top(B, q, aux)
+    if summed:
+        return _top(B, q, aux)
+    return stack(_top_parts(tuple(unstack_matrix(B)), tuple(unstack(q)), aux))
 
 
 @jax.custom_jvp
-def _top_matrix(B, q, aux, Q):
-    """`Q`, the rotation of `_top(B, q, aux)` computed by the kernel, differentiated as
-    `quat_to_matrix(_top(B, q, aux))`."""
-    del B, q, aux
+def _top_matrix(b, q, aux, Q):
+    """`Q`, the rotation of `_top_parts(b, q, aux)` computed by the kernel, differentiated as
+    `quat_to_matrix` of it."""
+    del b, q, aux
     return Q
 
 
 @_top_matrix.defjvp
 def _top_matrix_jvp(primals, tangents):
-    (B, q, aux, _), (dB, _, _, _) = primals, tangents
-    return jax.jvp(lambda b: quat_to_matrix(_top(b, q, aux), bounded=True), (B,), (dB,))
+    (b, q, aux, _), (db, _, _, _) = primals, tangents
+
+    def rotation(b):
+        return quat_to_matrix(stack(_top_parts(b, q, aux)), bounded=True)
+
+    return jax.jvp(rotation, (b,), (db,))
 
 
 def nearest_rotation(B):
@@ -318,7 +343,7 @@ def nearest_rotation(B):
     special-orthogonal polar factor), as the kernel forms it; differentiated as the matrix of
     `nearest_quaternion`. NaN where `B` is zero or not finite."""
     q, Q, aux = _run(B)
-    return _top_matrix(B, q, aux, Q)
+    return _top_matrix(tuple(unstack_matrix(B)), tuple(unstack(q)), aux, Q)
 
 
 def top_eigenvector(K):
@@ -336,11 +361,13 @@ def top_eigenvector(K):
     along the tied eigenspace, where the answer is not unique, is 0.
     """
     _check(K)
-    return _nearest(_k_to_b(K), nan_at_zero=False)
+    return _nearest(_k_to_b(K), nan_at_zero=False, summed=True)
 
 
-@_top.defjvp
-def _top_jvp(primals, tangents):
+def _top_tangent(b_e, db_e, v, aux):
+    """The tangent (components) of the top eigenvector `v` (`(..., 4)`) from the entries of `B`
+    and of its tangent, both scaled by the kernel's power of two, and the kernel's
+    `aux = (V, s)`."""
     # The rotation Q = R(v) maximises tr(Q^T B), so H = Q^T B is symmetric for every B. Moving B
     # by dB moves Q to Q (I + [w]x), and keeping H symmetric gives
     #     (tr(H) I - H) w = vee(Q^T dB - dB^T Q),      dv = v (x) (w / 2, 0).
@@ -352,14 +379,10 @@ def _top_jvp(primals, tangents):
     # expression is an exact identity in B, so its derivative is the second derivative of v. A
     # gap below TIE_ULPS eps |K| is a tie: Y is 0 along it. B is scaled by the kernel's exact
     # power of two (v does not depend on the scale).
-    (B, qe, aux), (dB, _, _) = primals, tangents
     V, s = aux
-    Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor
-    v = _top(B, qe, aux)
     # Entries read by unstack (a slice's transpose is a pad, which XLA:CPU evaluates per
     # element in a branch of its own: minutes to compile at second order)
-    q_e, b_e, v_e = (unstack_matrix(X) for X in (quat_to_matrix(v, bounded=True), Bs, V))
-    db_e = tangent_entries(dBs)
+    q_e, v_e = (unstack_matrix(X) for X in (quat_to_matrix(v, bounded=True), V))
 
     def qt(x, i, j):
         """`(Q^T X)_ij` from the entries `x` of `X` as a sum of per-element terms: XLA:CPU
@@ -374,7 +397,7 @@ def _top_jvp(primals, tangents):
     s0, s1, s2 = unstack(s)
     top = s0 + s1 + s2
     gaps = [s1 + s2, s0 + s2, s0 + s1]
-    tol = 0.5 * TIE_ULPS * eps(B.dtype) * max_abs(top, *(top - 2.0 * g for g in gaps))
+    tol = 0.5 * TIE_ULPS * eps(tr.dtype) * max_abs(top, *(top - 2.0 * g for g in gaps))
     inv_g = [safe_div(1.0, g, tol) for g in gaps]
     v_cols = [[v_e[3 * i + j] for i in range(3)] for j in range(3)]
 
@@ -389,8 +412,24 @@ def _top_jvp(primals, tangents):
 
     y = Y(r)
     half_w = [y[i] - 0.5 * z for i, z in enumerate(Y(A(y)))]  # (2 y - Y A y) / 2
-    dv = quat_multiply(v, stack([*half_w, jnp.zeros_like(tr)]))
-    return v, dv  # v, not the constant q: its derivative is the next order's
+    return tuple(unstack(quat_multiply(v, stack([*half_w, jnp.zeros_like(tr)]))))
+
+
+@_top.defjvp
+def _top_jvp(primals, tangents):
+    (B, qe, aux), (dB, _, _) = primals, tangents
+    Bs, dBs = jax.jvp(lambda b: pow2_scale(b, (-2, -1)), (B,), (dB,))  # a constant factor
+    v = _top(B, qe, aux)  # v, not the constant q: its derivative is the next order's
+    return v, stack(_top_tangent(unstack_matrix(Bs), tangent_entries(dBs), v, aux))
+
+
+@_top_parts.defjvp
+def _top_parts_jvp(primals, tangents):
+    (b, qe, aux), (db, _, _) = primals, tangents
+    f0, f1 = entry_pow2_factors(b)  # pow2_scale's factors (constants)
+    bs, dbs = ([(x * f0) * f1 for x in e] for e in (b, db))
+    v = _top_parts(b, qe, aux)
+    return v, _top_tangent(bs, dbs, stack(v), aux)
 
 
 def davenport_k(B):
@@ -417,9 +456,10 @@ def davenport_k(B):
     )
 
 
-def nearest_quaternion(B):
+def nearest_quaternion(B, summed=False):
     """Scalar-last unit quaternion `(..., 4)`, `w >= 0` (see `top_eigenvector` for
     `|w| <= 4 eps`), of the rotation `R` maximising
     `tr(R^T B)` for a `(..., 3, 3)` `B`: the nearest rotation to `B`, `det B < 0`
-    included. NaN where `B` is zero or not finite. Independent of the scale of `B`."""
-    return _nearest(B)
+    included. NaN where `B` is zero or not finite. Independent of the scale of `B`.
+    `summed`: `B` is a sum over a set (Wahba's attitude profile; see `_top`)."""
+    return _nearest(B, summed=summed)

@@ -394,7 +394,7 @@ def align_vectors(
     # Each set of vectors scaled by a power of two (exact) inside the products, so that B
     # neither underflows nor overflows; the rotation does not depend on these scales.
     B = _sum_outer(a, b, pow2_factors(a, (-2, -1)), pow2_factors(b, (-2, -1)))
-    q = nearest_quaternion(B)
+    q = nearest_quaternion(B, summed=True)
     return cast(from_scalar_last(q, scalar_first), dt)  # w >= 0
 
 

@@ -174,6 +174,40 @@ def test_gradient_program_is_one_pass(name, dtype):
     assert _pads(g, g_shapes, dtype) == 0, f"{what}: a pad (a slice's transpose)"
 
 
+
+# The projecting conversions (the elementwise eigen kernel): many loops forward (the Jacobi
+# sweeps), but the reverse mode adds only the derivative rule's few, and reads and writes little
+# more than the forward. Its tangents are per-rotation components (rotjax._eigen._top_parts):
+# a stacked tangent, read back by the caller, became in reverse mode a select and a reduction
+# per component, each a loop computing the whole incoming cotangent again (the vjp of
+# RigidTransform.from_matrix(T).as_exp_coords() had 35 loops more than its forward and 2.7x its
+# bytes).
+PROJECTING = {
+    "matrix_to_quaternion optimal": (
+        lambda R: rj.matrix_to_quaternion(R, method="optimal"), [(3, 3)]
+    ),
+    "Rotation.from_matrix": (lambda R: rj.Rotation.from_matrix(R).as_quat(), [(3, 3)]),
+    "nined_to_matrix": (rj.nined_to_matrix, [(9,)]),
+    "RigidTransform.from_matrix().as_exp_coords()": (
+        lambda T: rj.RigidTransform.from_matrix(T).as_exp_coords(), [(4, 4)]
+    ),
+}
+PROJECTING_LOOPS, PROJECTING_BYTES = 10, 1.5
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+@pytest.mark.parametrize("name", list(PROJECTING))
+def test_projection_gradient_adds_little(name, dtype):
+    f, shapes = PROJECTING[name]
+    loops, nbytes, _ = _program(f, shapes, dtype)
+    g, g_shapes, _ = _pullback(f, shapes, dtype)
+    g_loops, g_bytes, _ = _program(g, g_shapes, dtype)
+    what = f"vjp of {name} {np.dtype(dtype).name}"
+    assert g_loops <= loops + PROJECTING_LOOPS, f"{what}: {g_loops} loops, forward {loops}"
+    assert g_bytes <= PROJECTING_BYTES * nbytes, (
+        f"{what}: {g_bytes:.0f} bytes per rotation, forward {nbytes:.0f}"
+    )
+
 _DUMP_SCRIPT = """
 import sys
 import jax
