@@ -17,7 +17,7 @@ matrix (Bar-Itzhack 2000), Wahba's problem (Davenport's q-method) and the quater
   On the CPU the batch runs in cache-sized chunks (every intermediate stays in cache).
 * Derivative: from the 3x3 problem, `dv = v (x) (w / 2, 0)` with `(tr(H) I - H) w =
   vee(Q^T dB - dB^T Q)`, `H = Q^T B`, written as a differentiable expression of `B` (see
-  `_top_jvp`), so second derivatives are exact where the top eigenvalue is simple,
+  `_top_tangent`), so second derivatives are exact where the top eigenvalue is simple,
   including at ties among the lower ones (exact rotations, identical means).
 """
 
@@ -312,7 +312,7 @@ def _run(B, nan_at_zero=True):
 
 
 def _nearest(B, nan_at_zero=True, summed=False):
-    """The kernel's top eigenvector of `davenport_k(B)`, differentiable (`_top_jvp`);
+    """The kernel's top eigenvector of `davenport_k(B)`, differentiable (`_top_tangent`);
     `summed`: `B` is a sum over a set (see `_top`), else read from memory (`_top_parts`)."""
     q, _, aux = _run(B, nan_at_zero)
     if summed:
