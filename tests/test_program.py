@@ -174,7 +174,6 @@ def test_gradient_program_is_one_pass(name, dtype):
     assert _pads(g, g_shapes, dtype) == 0, f"{what}: a pad (a slice's transpose)"
 
 
-
 # The projecting conversions (the elementwise eigen kernel): many loops forward (the Jacobi
 # sweeps), but the reverse mode adds only the derivative rule's few, and reads and writes little
 # more than the forward. Its tangents are per-rotation components (rotjax._eigen._top_parts):
@@ -207,6 +206,7 @@ def test_projection_gradient_adds_little(name, dtype):
     assert g_bytes <= PROJECTING_BYTES * nbytes, (
         f"{what}: {g_bytes:.0f} bytes per rotation, forward {nbytes:.0f}"
     )
+
 
 _DUMP_SCRIPT = """
 import sys
