@@ -52,6 +52,24 @@ def test_table_ratios_against_fastest_peer_and_jaxlie(tmp_path):
     assert C.generate(path, tmp_path, check=True) == []
 
 
+def test_projecting_programs_compare_with_projecting_peers():
+    """The optimal conversion's ratio is to scipy's projecting from_matrix, not to jaxlie's
+    faster extraction; the other methods' to the fastest peer of all."""
+    m2q = "matrix_to_quaternion"
+    rows = [
+        _row("conversion", m2q, "rotjax shepperd", "float32", 0.1, 0.2),
+        _row("conversion", m2q, "rotjax optimal", "float32", 0.8, 1.6),
+        _row("conversion", m2q, "jaxlie", "float32", 0.2, 0.4),
+        _row("conversion", m2q, "scipy-jax project", "float32", 0.5, 2.0),
+    ]
+    doc = {"meta": {"cpu": "cpu", "date": "2026-01-01T00:00", "jax": "0"}, "rows": rows}
+    lines = [x for x in C.markdown(doc).splitlines() if x.startswith("| " + m2q)]
+    cells = [[c.strip() for c in x.strip("|").split("|")] for x in lines]
+    assert cells[0][2:8] == ["shepperd", "0.10", "jaxlie", "0.20", "0.50", "0.50"]
+    assert cells[1][2:8] == ["optimal", "0.80", "scipy-jax project", "0.50", "1.60", "4.00"]
+    assert cells[1][8:] == ["1.60", "2.00", "0.80"]
+
+
 @pytest.mark.slow  # a fresh Python process that imports JAX and compiles
 def test_child_measures_one_program_in_a_fresh_process():
     arg = json.dumps(["conversion", "quaternion_to_matrix", "rotjax", "float32"])

@@ -184,6 +184,15 @@ def scipy_like(peers, build: str, read: str, *args):
     return _scipy_peers(peers, call)
 
 
+def scipy_projecting(peers):
+    """scipy on JAX arrays with its default ``from_matrix``, which projects every matrix onto
+    SO(3) by an SVD under ``jit``: the peer of the projecting ``method="optimal"``."""
+    if "scipy-jax" not in peers:
+        return []
+    R = peers["scipy-jax"]
+    return [Contender("scipy-jax", "project", lambda x: R.from_matrix(x).as_quat(), True)]
+
+
 def jaxlie_reader(peers, read):
     """jaxlie on scalar-last quaternions: ``read(SO3(wxyz))`` per rotation."""
     if "jaxlie" not in peers:
@@ -372,6 +381,7 @@ CASES = {
             lambda p: ordered(
                 [rotjax_fn("matrix_to_quaternion", m) for m in ("shepperd", "markley", "optimal")],
                 scipy_like(p, "from_matrix", "as_quat"),
+                scipy_projecting(p),
                 jaxlie_builder(p, "from_matrix"),
             ),
             A.matrix_to_quaternion_errors,
@@ -557,6 +567,8 @@ def _rigid(x):
 
 
 def _scipy_rigid(peers):
+    """scipy's ``RigidTransform`` (on NumPy arrays, and on JAX arrays where ``"scipy-jax"`` is
+    among the peers), or None."""
     if "scipy" not in peers:
         return None
     from scipy.spatial.transform import RigidTransform
@@ -580,6 +592,10 @@ def _se3_contenders(p, op, build, read, jaxlie_call):
         out.append(Contender("jaxlie", "", jax.vmap(lambda x: jaxlie_call(SE3, x)), True))
     S = _scipy_rigid(p)
     if S is not None:
+        # On JAX arrays under jit (its from_matrix projects by an SVD, as rotjax's does), and
+        # on NumPy arrays.
+        if "scipy-jax" in p:
+            out.append(Contender("scipy-jax", "", via(S), True))
         out.append(Contender("scipy", "", via(S), False))
     return ordered(out)
 
@@ -628,6 +644,8 @@ def _rigid_apply_contenders(p):
         def scipy_apply(x):
             return S.from_components(x[..., 4:7], Rotation.from_quat(x[..., :4])).apply(x[..., 7:])
 
+        if "scipy-jax" in p:
+            out.append(Contender("scipy-jax", "", scipy_apply, True))
         out.append(Contender("scipy", "", scipy_apply, False))
     return ordered(out)
 
