@@ -70,6 +70,31 @@ def test_projecting_programs_compare_with_projecting_peers():
     assert cells[1][8:] == ["1.60", "2.00", "0.80"]
 
 
+def test_targets_include_scipy_on_jax_arrays():
+    """scipy's projecting from_matrix beside "optimal", its RigidTransform in the SE(3) rows."""
+    from scipy.spatial.transform import Rotation
+
+    got = C.targets({**peers(), "scipy-jax": Rotation})
+    assert ("conversion", "matrix_to_quaternion", "scipy-jax project") in got
+    for op in ("se3_exp", "se3_log", "rigid_apply"):
+        assert ("conversion", op, "scipy-jax") in got
+
+
+def test_measures_where_scipy_takes_jax_arrays(monkeypatch):
+    """Without SCIPY_ARRAY_API=1 (which scipy reads once, on import) the command runs itself
+    again with it, so that its targets include scipy on JAX arrays."""
+    from rotjax._bench import cli
+
+    calls = []
+    monkeypatch.delenv("SCIPY_ARRAY_API", raising=False)
+    monkeypatch.setattr(cli.subprocess, "call", lambda cmd, env: calls.append((cmd, env)) or 0)
+    monkeypatch.setattr(C, "measure", lambda *a, **k: pytest.fail("measured without scipy on JAX"))
+    assert C.main(["--only", "se3_log"]) == 0
+    ((cmd, env),) = calls
+    assert cmd[-4:] == ["bench", "compile", "--only", "se3_log"]
+    assert env["SCIPY_ARRAY_API"] == "1"
+
+
 @pytest.mark.slow  # a fresh Python process that imports JAX and compiles
 def test_child_measures_one_program_in_a_fresh_process():
     arg = json.dumps(["conversion", "quaternion_to_matrix", "rotjax", "float32"])

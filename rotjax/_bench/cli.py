@@ -20,6 +20,17 @@ MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": str(1 << 30), "MALLOC_TRIM_THRESHOLD_": 
 # scipy's Rotation computes on JAX arrays (jitted) only with this set before scipy is imported.
 SCIPY_ENV = {"SCIPY_ARRAY_API": "1"}
 
+
+def rerun_with(want, argv):
+    """``python -m rotjax bench *argv`` in a child process whose environment has ``want``
+    (variables that glibc and scipy read once, at start-up), unless this one has them: its
+    return code, or None (measure in this process)."""
+    if all(os.environ.get(k) == v for k, v in want.items()):
+        return None
+    cmd = [sys.executable, "-m", "rotjax", "bench", *argv]
+    return subprocess.call(cmd, env={**os.environ, **want})
+
+
 RUN_HELP = """\
 Measure every operation, method and dtype against the importable peers (scipy's Rotation on
 NumPy arrays and, jitted, on JAX arrays; jax.scipy.spatial.transform.Rotation; jaxlie SO3):
@@ -201,11 +212,9 @@ def main(argv: list[str] | None = None) -> int:
     dtypes = args.dtypes.split(",") if args.dtypes else None
     if dtypes is not None and not set(dtypes) <= set(DTYPES):
         p.error(f"unknown dtypes {sorted(set(dtypes) - set(DTYPES))}; expected some of {DTYPES}")
-    want = {**SCIPY_ENV, **(MALLOC_ENV if args.pin_malloc else {})}
-    if any(os.environ.get(k) != v for k, v in want.items()):
-        # glibc and scipy read these once, at start-up: measure in a child that has them.
-        env = {**os.environ, **want}
-        return subprocess.call([sys.executable, "-m", "rotjax", "bench", *argv], env=env)
+    rc = rerun_with({**SCIPY_ENV, **(MALLOC_ENV if args.pin_malloc else {})}, argv)
+    if rc is not None:
+        return rc
     from . import report
     from .runner import log, machine, run, settings
 

@@ -249,6 +249,11 @@ def main(argv) -> int:
     if args.child:
         print(json.dumps(child(*json.loads(args.child))))
         return 0
+    from .cli import SCIPY_ENV, rerun_with
+
+    rc = rerun_with(SCIPY_ENV, ["compile", *argv])  # the targets include scipy on JAX arrays
+    if rc is not None:
+        return rc
     meta = _meta()
 
     def save(rows):  # after each program: an interrupted run keeps what it measured

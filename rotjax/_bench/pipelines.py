@@ -17,7 +17,6 @@ import json
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -379,10 +378,11 @@ def main(argv) -> int:
     p.add_argument("--rounds", type=int, default=9)
     p.add_argument("--json", default=DEFAULT_JSON, help=f"output (default {DEFAULT_JSON})")
     args = p.parse_args(argv)
-    if os.environ.get("SCIPY_ARRAY_API") != "1":  # scipy computes on JAX arrays only so
-        env = {**os.environ, "SCIPY_ARRAY_API": "1"}
-        cmd = [sys.executable, "-m", "rotjax", "bench", "pipelines", *argv]
-        return subprocess.run(cmd, env=env, check=False).returncode
+    from .cli import SCIPY_ENV, rerun_with
+
+    rc = rerun_with(SCIPY_ENV, ["pipelines", *argv])  # scipy on JAX arrays
+    if rc is not None:
+        return rc
     rows = measure(args.log2_batch, args.rounds)
     doc = {"meta": _meta(args.log2_batch, args.rounds), "rows": rows}
     Path(args.json).write_text(json.dumps(doc, indent=1) + "\n")
