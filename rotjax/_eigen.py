@@ -317,7 +317,7 @@ def _nearest(B, nan_at_zero=True, summed=False):
     q, _, aux = _run(B, nan_at_zero)
     if summed:
         return _top(B, q, aux)
-    return stack(_top_parts(tuple(unstack_matrix(B)), tuple(unstack(q)), aux))
+    return stack(_top_parts(tuple(unstack_matrix(B)), tuple(unstack(q)), aux), unit=True)
 
 
 @jax.custom_jvp

@@ -80,7 +80,7 @@ def _elementary(axis: int, angle):
     z = jnp.zeros_like(s)
     comps = [z, z, z, c]
     comps[axis] = s
-    return stack(comps)
+    return stack(comps, unit=True)
 
 
 def _euler_to_quat(a, seq):

@@ -80,7 +80,7 @@ def _hemisphere_scale(v, sq):
 
 def _shepperd(R):
     """The quaternion of :func:`shepperd_parts`, stacked."""
-    return stack(shepperd_parts(tuple(entries(R))))
+    return stack(shepperd_parts(tuple(entries(R))), unit=True)
 
 
 def shepperd_parts(R):
@@ -119,7 +119,7 @@ def _markley(R):
     # hemisphere is chosen once, on K c.
     v = _k_times(cols, c)
     k = _hemisphere_scale(v, sum_squares(v))
-    return stack([x * k for x in v])
+    return stack([x * k for x in v], unit=True)
 
 
 def quat_from_matrix(R, method: str):

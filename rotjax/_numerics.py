@@ -203,14 +203,16 @@ def sum_squares(xs):
 # whole chain into one loop whatever the layout of the intermediate results (XLA does not see
 # through a stacked array read back by slices: it writes it out, or recomputes it per slice).
 # unstack(stack(parts)) == parts exactly, so values and derivatives are those of the code.
-_PARTS: dict[int, tuple[weakref.ref, tuple, bool]] = {}
+# A stacked unit quaternion (a conversion's, a normalisation's) is marked so: its readers skip
+# the prescaling, which is exactly 1 for it (see rotjax._quaternion._prescaled_parts).
+_PARTS: dict[int, tuple[weakref.ref, tuple, bool, bool]] = {}
 
 
-def _note(out, parts, matrix=False) -> None:
+def _note(out, parts, matrix=False, unit=False) -> None:
     if isinstance(out, jax.core.Tracer):
         key = id(out)
         ref = weakref.ref(out, lambda _, key=key: _PARTS.pop(key, None))
-        _PARTS[key] = (ref, tuple(parts), matrix)
+        _PARTS[key] = (ref, tuple(parts), matrix, unit)
 
 
 def _parts(x, matrix):
@@ -226,6 +228,13 @@ def recorded(x) -> bool:
     """Whether ``x`` is a result of :func:`stack` in this trace (whose parts :func:`unstack`
     returns)."""
     return _parts(x, False) is not None
+
+
+def noted_unit(x) -> bool:
+    """Whether ``x`` is a result of ``stack(parts, unit=True)`` in this trace: a quaternion of
+    unit norm to rounding, or NaN."""
+    hit = _PARTS.get(id(x))
+    return hit is not None and hit[0]() is x and not hit[2] and hit[3]
 
 
 def unstack(x):
@@ -250,9 +259,10 @@ def _read_jvp(primals, tangents):
     return _read(x), tuple(_components(dx))
 
 
-def stack(parts):
+def stack(parts, unit=False):
     """``(..., k)`` from ``k`` per-rotation arrays: the one way rotjax writes a stacked array
-    (see :func:`unstack`).
+    (see :func:`unstack`). ``unit``: the parts are those of a unit quaternion (to rounding) or
+    NaN, noted for :func:`noted_unit`.
 
     Written as a select on the last axis among the broadcast parts: each output element
     computes every part, so XLA:CPU's loop computes the shared per-rotation factors once and is
@@ -264,7 +274,7 @@ def stack(parts):
     ``_elementary``."""
     shape = jnp.broadcast_shapes(*(jnp.shape(p) for p in parts))
     out = _select_stack(tuple(jnp.broadcast_to(p, shape) for p in parts))
-    _note(out, parts)
+    _note(out, parts, unit=unit)
     return out
 
 

@@ -22,6 +22,7 @@ from ._numerics import (
     check_shape,
     exponent_scale,
     from_scalar_last,
+    noted_unit,
     public,
     recorded,
     stack,
@@ -55,8 +56,10 @@ def _prescaled_parts(q, bounded=False):
     applies inside the loop that reads ``q``, rather than into a copy of ``q``.
 
     ``bounded``: ``q`` is of order 1 (a unit quaternion, a product of :func:`quat_rescaled`
-    ones) or NaN where it is not a rotation, and is returned as it is (``s = 1``)."""
-    return _prescale(unstack(q), bounded)
+    ones) or NaN where it is not a rotation, and is returned as it is (``s = 1``); so is a
+    unit quaternion computed in this trace (:func:`rotjax._numerics.noted_unit`), for which
+    ``s`` is exactly 1."""
+    return _prescale(unstack(q), bounded or noted_unit(q))
 
 
 def _prescale(parts, bounded=False):
@@ -88,7 +91,7 @@ def scaled_vector_part(q, scale, with_w, bounded=False):
     """``k q_v`` with ``k = scale(n2, w)`` a per-rotation function of the prescaled quaternion
     (see :func:`_prescaled_parts`), ``n2 = |q_v|^2`` (``|q|^2`` with ``with_w``): the
     logarithm map and the MRP. ``bounded``: see :func:`_prescaled_parts`."""
-    return stack(scaled_vector_parts(tuple(unstack(q)), scale, with_w, bounded))
+    return stack(scaled_vector_parts(tuple(unstack(q)), scale, with_w, bounded or noted_unit(q)))
 
 
 def scaled_vector_parts(q, scale, with_w, bounded=False):
@@ -101,7 +104,8 @@ def scaled_vector_parts(q, scale, with_w, bounded=False):
 
 
 def quat_multiply(p, q):
-    """Hamilton product of scalar-last quaternions (no normalisation)."""
+    """Hamilton product of scalar-last quaternions (no normalisation); noted unit (see
+    :func:`rotjax._numerics.noted_unit`) where both factors are."""
     px, py, pz, pw = unstack(p)
     qx, qy, qz, qw = unstack(q)
     return stack(
@@ -110,13 +114,14 @@ def quat_multiply(p, q):
             pw * qy - px * qz + py * qw + pz * qx,
             pw * qz + px * qy - py * qx + pz * qw,
             pw * qw - px * qx - py * qy - pz * qz,
-        ]
+        ],
+        unit=noted_unit(p) and noted_unit(q),
     )
 
 
 def quat_conjugate(q):
     x, y, z, w = unstack(q)
-    return stack([-x, -y, -z, w])
+    return stack([-x, -y, -z, w], unit=noted_unit(q))
 
 
 def quat_normalize(q, bounded=False):
@@ -125,7 +130,7 @@ def quat_normalize(q, bounded=False):
     ``bounded``: see :func:`_prescaled_parts`."""
     p, _ = _prescaled_parts(q, bounded)
     r = rsqrt(sum_squares(p))
-    return stack([x * r for x in p])
+    return stack([x * r for x in p], unit=True)
 
 
 def quat_renormalize(q):
@@ -135,7 +140,7 @@ def quat_renormalize(q):
     own."""
     p = unstack(q)
     r = rsqrt(sum_squares(p))
-    return stack([x * r for x in p])
+    return stack([x * r for x in p], unit=True)
 
 
 def quat_to_matrix(q, bounded=False):
@@ -385,7 +390,7 @@ def quat_turn(p, v):
 def quat_apply(q, v, bounded=False):
     """``R(q) v`` for a scalar-last ``q`` of any finite non-zero norm (see quaternion_apply).
     ``bounded``: see :func:`_prescaled_parts`."""
-    return stack(_apply_parts(tuple(unstack(q)), tuple(unstack(v)), bounded))
+    return stack(_apply_parts(tuple(unstack(q)), tuple(unstack(v)), bounded or noted_unit(q)))
 
 
 def _apply_parts(q, v, bounded=False):

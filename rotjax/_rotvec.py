@@ -50,7 +50,7 @@ def exp_coeffs(theta2):
 
 def rotvec_to_quat(v):
     """`(k v, c)` with `k, c = exp_coeffs(|v|^2)`: the exponential map, scalar last."""
-    return stack(_rotvec_to_quat_parts(tuple(unstack(v))))
+    return stack(_rotvec_to_quat_parts(tuple(unstack(v))), unit=True)
 
 
 @jax.custom_jvp

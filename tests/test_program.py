@@ -428,3 +428,38 @@ def test_composed_program_is_one_pass(name, dtype, mode):
     )
     if grad:
         assert _pads(g, g_shapes, dtype) == 0, f"vjp of {name}: a pad (a slice's transpose)"
+
+
+# A chain of functions against the same chain of objects. A conversion's unit quaternion is
+# noted (rotjax._numerics.noted_unit), as a Rotation built by one is marked, so the readers
+# after it skip the prescaling (its exact factor is 1) through either API.
+FUNCTIONS_AND_OBJECTS = {
+    "normalize(rotvec_to_quaternion)": (
+        lambda v: rj.quaternion_normalize(rj.rotvec_to_quaternion(v)),
+        lambda v: rj.Rotation.from_rotvec(v).as_quat(), [(3,)]),
+    "apply(euler_to_quaternion)": (
+        lambda a, v: rj.quaternion_apply(rj.euler_to_quaternion(a, SEQ), v),
+        lambda a, v: rj.Rotation.from_euler(SEQ, a).apply(v), [(3,), (3,)]),
+    "to_rotvec(euler_to_quaternion)": (
+        lambda a: rj.quaternion_to_rotvec(rj.euler_to_quaternion(a, SEQ)),
+        lambda a: rj.Rotation.from_euler(SEQ, a).as_rotvec(), [(3,)]),
+    "rotation_angle(rotvec_to_quaternion)": (
+        lambda v: rj.rotation_angle(rj.rotvec_to_quaternion(v)),
+        lambda v: rj.Rotation.from_rotvec(v).magnitude(), [(3,)]),
+    "to_matrix(multiply(rotvec_to_quaternion, euler_to_quaternion))": (
+        lambda a, b: rj.quaternion_to_matrix(
+            rj.quaternion_multiply(rj.rotvec_to_quaternion(a), rj.euler_to_quaternion(b, SEQ))),
+        lambda a, b: (rj.Rotation.from_rotvec(a) * rj.Rotation.from_euler(SEQ, b)).as_matrix(),
+        [(3,), (3,)]),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+@pytest.mark.parametrize("name", list(FUNCTIONS_AND_OBJECTS))
+def test_function_chain_does_no_more_than_objects(name, dtype):
+    functions, objects, shapes = FUNCTIONS_AND_OBJECTS[name]
+    f_loops, f_bytes, f_flops = _program(functions, shapes, dtype)
+    o_loops, o_bytes, o_flops = _program(objects, shapes, dtype)
+    what = f"{name} {np.dtype(dtype).name}"
+    assert (f_loops, f_bytes) <= (o_loops, o_bytes), f"{what}: loops and bytes"
+    assert f_flops <= o_flops, f"{what}: {f_flops:.0f} flops per rotation, objects {o_flops:.0f}"
