@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import inspect
 import weakref
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -205,23 +206,34 @@ def sum_squares(xs):
 # unstack(stack(parts)) == parts exactly, so values and derivatives are those of the code.
 # A stacked unit quaternion (a conversion's, a normalisation's) is marked so: its readers skip
 # the prescaling, which is exactly 1 for it (see rotjax._quaternion._prescaled_parts).
-_PARTS: dict[int, tuple[weakref.ref, tuple, bool, bool]] = {}
+class _Record(NamedTuple):
+    ref: weakref.ref  # the traced array (its id may be reused once it is gone)
+    parts: tuple
+    matrix: bool  # by stack_matrix
+    unit: bool  # a unit quaternion (see noted_unit)
+
+
+_PARTS: dict[int, _Record] = {}
 
 
 def _note(out, parts, matrix=False, unit=False) -> None:
     if isinstance(out, jax.core.Tracer):
         key = id(out)
         ref = weakref.ref(out, lambda _, key=key: _PARTS.pop(key, None))
-        _PARTS[key] = (ref, tuple(parts), matrix, unit)
+        _PARTS[key] = _Record(ref, tuple(parts), matrix, unit)
+
+
+def _record(x, matrix):
+    """What :func:`stack` (or, ``matrix``, :func:`stack_matrix`) recorded for ``x`` in this
+    trace, or None."""
+    hit = _PARTS.get(id(x))
+    return hit if hit is not None and hit.ref() is x and hit.matrix == matrix else None
 
 
 def _parts(x, matrix):
-    """The parts that :func:`stack` (or, ``matrix``, :func:`stack_matrix`) recorded for ``x``
-    in this trace, or None."""
-    hit = _PARTS.get(id(x))
-    if hit is not None and hit[0]() is x and hit[2] == matrix:
-        return list(hit[1])
-    return None
+    """The parts recorded for ``x`` (see :func:`_record`), or None."""
+    hit = _record(x, matrix)
+    return None if hit is None else list(hit.parts)
 
 
 def recorded(x) -> bool:
@@ -233,8 +245,8 @@ def recorded(x) -> bool:
 def noted_unit(x) -> bool:
     """Whether ``x`` is a result of ``stack(parts, unit=True)`` in this trace: a quaternion of
     unit norm to rounding, or NaN."""
-    hit = _PARTS.get(id(x))
-    return hit is not None and hit[0]() is x and not hit[2] and hit[3]
+    hit = _record(x, False)
+    return hit is not None and hit.unit
 
 
 def unstack(x):

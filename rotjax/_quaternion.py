@@ -91,7 +91,8 @@ def scaled_vector_part(q, scale, with_w, bounded=False):
     """``k q_v`` with ``k = scale(n2, w)`` a per-rotation function of the prescaled quaternion
     (see :func:`_prescaled_parts`), ``n2 = |q_v|^2`` (``|q|^2`` with ``with_w``): the
     logarithm map and the MRP. ``bounded``: see :func:`_prescaled_parts`."""
-    return stack(scaled_vector_parts(tuple(unstack(q)), scale, with_w, bounded or noted_unit(q)))
+    p, _ = _prescaled_parts(q, bounded)
+    return stack(scaled_vector_parts(tuple(p), scale, with_w, bounded=True))
 
 
 def scaled_vector_parts(q, scale, with_w, bounded=False):
@@ -390,7 +391,8 @@ def quat_turn(p, v):
 def quat_apply(q, v, bounded=False):
     """``R(q) v`` for a scalar-last ``q`` of any finite non-zero norm (see quaternion_apply).
     ``bounded``: see :func:`_prescaled_parts`."""
-    return stack(_apply_parts(tuple(unstack(q)), tuple(unstack(v)), bounded or noted_unit(q)))
+    p, _ = _prescaled_parts(q, bounded)
+    return stack(_apply_parts(tuple(p), tuple(unstack(v)), bounded=True))
 
 
 def _apply_parts(q, v, bounded=False):
