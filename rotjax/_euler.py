@@ -21,8 +21,8 @@ from ._numerics import (
     from_scalar_last,
     max_abs_bits,
     public,
-    recorded,
     select,
+    spread,
     stack,
     stack_matrix,
     to_scalar_last,
@@ -251,10 +251,7 @@ def _substitute(abcd, locks):
 
 def quat_to_euler(q, seq):
     """Euler angles (output order) of a scalar-last quaternion of any non-zero norm."""
-    # q read from memory: three atan2 and a stack on the last axis, one vectorised loop (the
-    # per-slot form below leaves q's scale in a loop of its own). q computed in this trace
-    # (stacked by the operation before): the per-slot form, one loop with that operation.
-    return _quat_to_euler_stacked(tuple(unstack(q)), seq, recorded(q))
+    return _quat_to_euler_stacked(tuple(unstack(q)), seq)
 
 
 def _slots(x, values):
@@ -262,14 +259,25 @@ def _slots(x, values):
     return jnp.asarray(values, x.dtype).reshape((1,) * (x.ndim - 1) + (3,))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
-def _quat_to_euler_stacked(q, seq, per_slot=True):
+def _per_slot(parts):
+    """``(..., 3)``: slot ``k`` from ``parts[k]`` (each ``(..., 3)``)."""
+    col = jax.lax.broadcasted_iota(jnp.int32, parts[0].shape, parts[0].ndim - 1)
+    return jnp.where(col == 0, parts[0], jnp.where(col == 1, parts[1], parts[2]))
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _quat_to_euler_stacked(q, seq):
     """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold,
     on the four components of ``q`` (scalar last, any non-zero norm: every step is a ratio
-    inside atan2); the ``(..., 3)`` angles in output order. ``per_slot``: one atan2 per output
-    element, of arguments selected for its slot (for a ``q`` computed in the same loop), else
-    three atan2 per rotation, stacked.
+    inside atan2); the ``(..., 3)`` angles in output order.
     """
+    # Each output element computes its angle from the whole quaternion, spread over the three
+    # slots first (see `spread`): one vectorised loop and one atan2 per output element, of the
+    # arguments selected for its slot, whether q is read from memory or computed by the
+    # operation before. (Per-rotation values stacked per slot left the power-of-two scale in a
+    # loop of its own, and after from_euler the quaternion in memory; three atan2 stacked were
+    # one loop, 1.55x slower.)
+    q = tuple(spread(x, 3) for x in q)
     _, (a, b, c, d), _, locks, bad = _factors(*q, seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
@@ -282,23 +290,13 @@ def _quat_to_euler_stacked(q, seq, per_slot=True):
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
-    # Each angle is one atan2 of its own arguments: the arguments are stacked (a select, which
-    # XLA:CPU computes in one vectorised loop with the per-rotation factors shared) and atan2
-    # runs once per output element; three atan2 stacked on a leading axis and moved last were a
-    # narrow loop, up to six times slower after a conversion that computes q.
+    num, den = _per_slot([num[n] for n in order]), _per_slot([den[n] for n in order])
+    out = atan2(num, den) * _slots(num, factor) + _slots(num, shift)
     # The substitution makes the zeroed (last) angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: it is set exactly.
-    locked = locks[0] | locks[1]
-    if per_slot:
-        num, den = stack([num[n] for n in order]), stack([den[n] for n in order])
-        out = atan2(num, den) * _slots(num, factor) + _slots(num, shift)
-        last = _slots(num, (0, 0, 1)) == 1
-        out = jnp.where(last & locked[..., None], 0.0, out)
-    else:
-        out = [atan2(num[n], den[n]) * f + s for n, f, s in zip(order, factor, shift, strict=True)]
-        out[2] = jnp.where(locked, 0.0, out[2])
-        out = jnp.stack(out, axis=-1)
-    return jnp.where(bad[..., None], jnp.nan, out)
+    last = _slots(num, (0, 0, 1)) == 1
+    out = jnp.where(last & (locks[0] | locks[1]), 0.0, out)
+    return jnp.where(bad, jnp.nan, out)
 
 
 @functools.cache
@@ -366,12 +364,12 @@ def _euler_jacobian(comps, seq):
 
 
 @_quat_to_euler_stacked.defjvp
-def _quat_to_euler_stacked_jvp(seq, per_slot, primals, tangents):
+def _quat_to_euler_stacked_jvp(seq, primals, tangents):
     # The exact derivative of the code above (see _euler_jacobian).
     (q,), (dq,) = primals, tangents
     jac = _euler_jacobian(q, seq)
     out = jnp.stack([sum(j * x for j, x in zip(row, dq, strict=True)) for row in jac], axis=-1)
-    return _quat_to_euler_stacked(q, seq, per_slot), out
+    return _quat_to_euler_stacked(q, seq), out
 
 
 def _matrix_to_euler(R, seq):

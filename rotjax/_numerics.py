@@ -282,12 +282,25 @@ def stack(parts, unit=False):
     merges nor vectorises), and no transpose is left for the layout pass to turn into a copy
     when the result is one of several outputs. A root, a division or a transcendental function
     read by several slots is computed in a loop of its own: stack its arguments instead and
-    apply it to the stacked array (as quaternion_to_euler's atan2), or use the fusible forms of
-    ``_elementary``."""
+    apply it to the stacked array, or ``spread`` the inputs (as quaternion_to_euler), or use the
+    fusible forms of ``_elementary``."""
     shape = jnp.broadcast_shapes(*(jnp.shape(p) for p in parts))
     out = _select_stack(tuple(jnp.broadcast_to(p, shape) for p in parts))
     _note(out, parts, unit=unit)
     return out
+
+
+def spread(x, k):
+    """``(..., k)``: the per-rotation array ``x`` in each of ``k`` slots on a new last axis, for
+    a kernel that computes each output element from the whole input (as a ``stack`` does, but
+    with every step after the spread done per slot).
+
+    A select on the slot index that never picks its zero: XLA moves a plain broadcast past the
+    element-wise operations after it, back to per-rotation values that every slot reads, and
+    computes such a value in a loop of its own when it is too long to copy into each reader
+    (quaternion_to_euler's power-of-two scale was)."""
+    col = jax.lax.broadcasted_iota(jnp.int32, (*jnp.shape(x), k), jnp.ndim(x))
+    return jnp.where(col == k, jnp.zeros((), x.dtype), x[..., None])
 
 
 @jax.custom_jvp

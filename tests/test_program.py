@@ -28,7 +28,9 @@ SEQ = "ZYX"
 
 # name: (function, per-rotation argument shapes (the gradient is taken with respect to the
 # first), forward (loops, bytes / (inputs + outputs), flops per rotation), and the same for
-# jit(grad)). Flop budgets: the float64 count (the larger) rounded up by about 15%.
+# jit(grad)). Flop budgets: the float64 count (the larger) rounded up by about 15%. The Euler
+# extractions compute each angle from the whole quaternion (see rotjax._numerics.spread): about
+# three times the per-rotation flops, in one vectorised loop that runs faster.
 CASES = {
     "matrix_to_quaternion": (
         rj.matrix_to_quaternion, [(3, 3)], (1, BYTES_SLACK, 180), (1, BYTES_SLACK, 470)
@@ -38,10 +40,10 @@ CASES = {
         (1, BYTES_SLACK, 680),
     ),
     "matrix_to_euler": (
-        lambda R: rj.matrix_to_euler(R, SEQ), [(3, 3)], (1, BYTES_SLACK, 575), (1, BYTES_SLACK, 780)
+        lambda R: rj.matrix_to_euler(R, SEQ), [(3, 3)], (1, BYTES_SLACK, 925), (1, BYTES_SLACK, 780)
     ),
     "quaternion_to_euler": (
-        lambda q: rj.quaternion_to_euler(q, SEQ), [(4,)], (1, BYTES_SLACK, 370), (5, 2.3, 410)
+        lambda q: rj.quaternion_to_euler(q, SEQ), [(4,)], (1, BYTES_SLACK, 785), (5, 2.3, 410)
     ),
     "quaternion_to_matrix": (
         rj.quaternion_to_matrix, [(4,)], (1, BYTES_SLACK, 90), (1, BYTES_SLACK, 225)
@@ -374,12 +376,8 @@ COMPOSED = {
 # gradient (its budget above admits the same), and from_euler's matrix through the quaternion.
 # And it writes each output of a program in a loop of its own
 # (no multi-output fusion), each reading the inputs it needs: the translation and the rotation
-# of a transform read the same matrix or quaternion. as_euler computes one atan2 per output
-# angle, of arguments selected for it; after a producer of sines and cosines (from_euler) XLA
-# writes the quaternion and reads it back rather than compute them once per angle: 2^18
-# rotations, 6x faster than the single loop of three atan2 stacked on a leading axis.
+# of a transform read the same matrix or quaternion.
 COMPOSED_SLACK = {
-    ("Rotation.from_euler().as_euler()", "forward"): 2.05,
     ("Rotation.from_quat().as_euler()", "gradient"): 2.3,
     ("Rotation.from_euler().as_matrix()", "forward"): 1.55,
     ("RigidTransform.inv", "forward"): 1.35,
