@@ -373,6 +373,15 @@ def _components(x):
     return [jnp.sum(jnp.where(col == i, x, 0.0), axis=-1) for i in range(k)]
 
 
+def shared_tangent(parts):
+    """The per-rotation tangent ``parts`` of a hand-written rule, stacked and read back by
+    :func:`_components`: the same values, but in reverse mode their cotangents are written once,
+    as one array in one loop, for every later reader. Left as expressions, a cotangent that
+    several outputs read was computed again in each output's loop (XLA:CPU does not fuse
+    several outputs into one loop)."""
+    return _components(jnp.stack(parts, axis=-1))
+
+
 def max_abs(*xs):
     """Elementwise largest `|x|` over per-element arrays (`jnp.maximum`, not `jnp.max`
     over a stacked axis: XLA:CPU splits a reduction into loops of its own), in a balanced tree
