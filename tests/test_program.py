@@ -210,6 +210,31 @@ def test_projection_gradient_adds_little(name, dtype):
     )
 
 
+# The fitting problems: the eigenvector of a sum over a set. The rule writes its intermediate
+# tangent once (rotjax._numerics.shared_tangent); left as expressions, its cotangent was computed
+# again in the loop of each entry of the summed matrix (quaternion_mean: 71 loops more than its
+# forward, 4.0x its bytes; align_vectors: 31 and 2.0x). Loops added and bytes against the forward.
+SUMMED = {
+    "quaternion_mean": (rj.quaternion_mean, [(8, 4)], 52, 3.0),
+    "align_vectors": (rj.align_vectors, [(8, 3), (8, 3)], 27, 1.85),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+@pytest.mark.parametrize("name", list(SUMMED))
+def test_summed_eigenvector_gradient_adds_little(name, dtype):
+    f, shapes, extra_loops, byte_ratio = SUMMED[name]
+    loops, nbytes, _ = _program(f, shapes, dtype)
+    g, g_shapes, _ = _pullback(f, shapes, dtype)
+    g_loops, g_bytes, _ = _program(g, g_shapes, dtype)
+    what = f"vjp of {name} {np.dtype(dtype).name}"
+    assert g_loops <= loops + extra_loops, f"{what}: {g_loops} loops, forward {loops}"
+    assert g_bytes <= byte_ratio * nbytes, (
+        f"{what}: {g_bytes:.0f} bytes per problem, forward {nbytes:.0f}"
+    )
+
+
 _DUMP_SCRIPT = """
 import sys
 import jax
