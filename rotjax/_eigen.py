@@ -413,8 +413,7 @@ def _top_tangent(b_e, db_e, v, aux, summed=False):
 
     # For a sum over a set, every later step reads r: written once (shared_tangent), its
     # cotangent is computed once in reverse mode, rather than again in the loop of each of B's
-    # entries (quaternion_mean's jit(grad) compiles in 27% less time and runs 1.5x faster). For
-    # a matrix read from memory it costs a loop and 7% more bytes, for no gain.
+    # entries. For a matrix read from memory it only adds a loop.
     y = Y(shared_tangent(r) if summed else r)
     half_w = [y[i] - 0.5 * z for i, z in enumerate(Y(A(y)))]  # (2 y - Y A y) / 2
     return tuple(unstack(quat_multiply(v, stack([*half_w, jnp.zeros_like(tr)]))))

@@ -274,9 +274,7 @@ def _quat_to_euler_stacked(q, seq):
     # Each output element computes its angle from the whole quaternion, spread over the three
     # slots first (see `spread`): one vectorised loop and one atan2 per output element, of the
     # arguments selected for its slot, whether q is read from memory or computed by the
-    # operation before. (Per-rotation values stacked per slot left the power-of-two scale in a
-    # loop of its own, and after from_euler the quaternion in memory; three atan2 stacked were
-    # one loop, 1.55x slower.)
+    # operation before.
     q = tuple(spread(x, 3) for x in q)
     _, (a, b, c, d), _, locks, bad = _factors(*q, seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
