@@ -20,6 +20,7 @@ from ._numerics import (
     float_bits,
     from_scalar_last,
     max_abs_bits,
+    per_slot,
     public,
     select,
     spread,
@@ -259,12 +260,6 @@ def _slots(x, values):
     return jnp.asarray(values, x.dtype).reshape((1,) * (x.ndim - 1) + (3,))
 
 
-def _per_slot(parts):
-    """``(..., 3)``: slot ``k`` from ``parts[k]`` (each ``(..., 3)``)."""
-    col = jax.lax.broadcasted_iota(jnp.int32, parts[0].shape, parts[0].ndim - 1)
-    return jnp.where(col == 0, parts[0], jnp.where(col == 1, parts[1], parts[2]))
-
-
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def _quat_to_euler_stacked(q, seq):
     """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold,
@@ -288,7 +283,7 @@ def _quat_to_euler_stacked(q, seq):
     num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
     den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
-    num, den = _per_slot([num[n] for n in order]), _per_slot([den[n] for n in order])
+    num, den = per_slot([num[n] for n in order]), per_slot([den[n] for n in order])
     out = atan2(num, den) * _slots(num, factor) + _slots(num, shift)
     # The substitution makes the zeroed (last) angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: it is set exactly.

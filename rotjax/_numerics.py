@@ -303,6 +303,16 @@ def spread(x, k):
     return jnp.where(col == k, jnp.zeros((), x.dtype), x[..., None])
 
 
+def per_slot(parts):
+    """``(..., k)`` with slot ``i`` taken from ``parts[i]``, each already ``(..., k)`` (computed
+    per slot after :func:`spread`): the counterpart of :func:`stack` for such parts."""
+    col = jax.lax.broadcasted_iota(jnp.int32, parts[0].shape, parts[0].ndim - 1)
+    out = parts[-1]
+    for i in range(len(parts) - 2, -1, -1):
+        out = jnp.where(col == i, parts[i], out)
+    return out
+
+
 @jax.custom_jvp
 def _select_stack(parts):
     k = len(parts)
