@@ -22,6 +22,7 @@ from ._numerics import (
     matmul,
     public,
     to_scalar_last,
+    where,
 )
 from ._quaternion import quat_multiply, quat_normalize
 from ._rotvec import quat_to_rotvec, rotvec_to_quat
@@ -30,8 +31,8 @@ from ._rotvec import quat_to_rotvec, rotvec_to_quat
 def _canonical(q):
     """Sign flip making the first non-zero of `(w, x, y, z)` positive (scalar-last `q`)."""
     x, y, z, w = jnp.moveaxis(q, -1, 0)
-    lead = jnp.where(w != 0, w, jnp.where(x != 0, x, jnp.where(y != 0, y, z)))
-    return jnp.where((lead < 0)[..., None], -q, q)
+    lead = where(w != 0, w, where(x != 0, x, where(y != 0, y, z)))
+    return where((lead < 0)[..., None], -q, q)
 
 
 def _svd_signed(M):

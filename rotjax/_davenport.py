@@ -8,7 +8,16 @@ from jax.typing import ArrayLike
 
 from ._euler import quat_to_euler
 from ._matrix import quat_from_matrix
-from ._numerics import as_float, cast, check_shape, cross, from_scalar_last, public, to_scalar_last
+from ._numerics import (
+    as_float,
+    cast,
+    check_shape,
+    cross,
+    from_scalar_last,
+    public,
+    to_scalar_last,
+    where,
+)
 from ._quaternion import quat_conjugate, quat_multiply
 from ._rotvec import rotvec_to_quat
 
@@ -85,7 +94,7 @@ def davenport_to_quaternion(
     for i in range(k):
         qi = rotvec_to_quat(angles[..., i, None] * unit[..., i, :])
         q = qi if q is None else (quat_multiply(qi, q) if extrinsic else quat_multiply(q, qi))
-    q = jnp.where(bad[..., None], jnp.nan, q)
+    q = where(bad[..., None], jnp.nan, q)
     return cast(from_scalar_last(q, scalar_first), dt)
 
 
@@ -150,19 +159,19 @@ def quaternion_to_davenport(
     lam = jnp.arctan2(jnp.sum(m3 * c, axis=-1), jnp.sum(m3 * m1, axis=-1))
     # For l > 0 use -m2 (then l -> -l) and negate the middle angle at the end: scipy's ranges.
     flip = lam > 0
-    m2 = jnp.where(flip[..., None], -m2, m2)
-    c = jnp.where(flip[..., None], -c, c)
-    lam = jnp.where(flip, -lam, lam)
+    m2 = where(flip[..., None], -m2, m2)
+    c = where(flip[..., None], -c, c)
+    lam = where(flip, -lam, lam)
     qb = quat_from_matrix(jnp.stack([m1, m2, c], axis=-1), "shepperd")  # columns: a rotation
     z = jnp.zeros_like(lam)
     qy = jnp.stack([z, jnp.sin(-lam / 2), z, jnp.cos(-lam / 2)], axis=-1)
     qp = quat_multiply(quat_multiply(quat_multiply(quat_conjugate(qb), q), qb), qy)
     ang = quat_to_euler(qp, "XYX")
     mid = ang[..., 1] + lam
-    ang = jnp.stack([ang[..., 0], jnp.where(flip, -mid, mid), ang[..., 2]], axis=-1)
+    ang = jnp.stack([ang[..., 0], where(flip, -mid, mid), ang[..., 2]], axis=-1)
     if extrinsic:
         ang = ang[..., ::-1]
-    ang = jnp.where(bad[..., None], jnp.nan, ang)
+    ang = where(bad[..., None], jnp.nan, ang)
     if degrees:
         ang = jnp.rad2deg(ang)
     return cast(ang, dt)

@@ -45,6 +45,7 @@ from ._numerics import (
     tangent_entries,
     unstack,
     unstack_matrix,
+    where,
 )
 from ._quaternion import quat_multiply, quat_to_matrix
 from ._shepperd import k4_columns, masks_once, select_column
@@ -83,11 +84,11 @@ def _pow2_factors(m):
     dt = m.dtype
     k = float(2 ** (jnp.finfo(dt).nexp - 2))  # 2^k, 2^-k, and their products with 2^E stay normal
     big, small = jnp.asarray(2.0**k, dt), jnp.asarray(2.0**-k, dt)
-    c = jnp.where(m > big, small, jnp.where(m < small, big, 1.0))
+    c = where(m > big, small, where(m < small, big, 1.0))
     mc = m * c
     s, _ = exponent_scale(mc)
     nan = select(jnp.isfinite(m), 1.0, jnp.nan, dt)
-    return c * nan, 0.5 * jnp.where(mc > 0, s, 1.0) * nan
+    return c * nan, 0.5 * where(mc > 0, s, 1.0) * nan
 
 
 def pow2_factors(x, axes):
@@ -101,7 +102,7 @@ def pow2_factors(x, axes):
     flat = jax.lax.stop_gradient(x).reshape(*x.shape[: x.ndim - n], -1)
     if flat.shape[-1] <= UNROLL_MAX:
         return entry_pow2_factors([flat[..., i] for i in range(flat.shape[-1])])
-    return _pow2_factors(jnp.max(jnp.where(jnp.isnan(flat), jnp.inf, jnp.abs(flat)), axis=-1))
+    return _pow2_factors(jnp.max(where(jnp.isnan(flat), jnp.inf, jnp.abs(flat)), axis=-1))
 
 
 def entry_pow2_factors(entries):
@@ -138,13 +139,14 @@ def _rotation(app, aqq, apq):
     d = aqq - app
     r = jnp.sqrt(d * d + 4.0 * apq * apq)
     keep = d < 0
-    num = jnp.where(keep, 2.0 * apq, -(d + r))
-    den = jnp.where(keep, d - r, 2.0 * apq)
+    num = where(keep, 2.0 * apq, -(d + r))
+    den = where(keep, d - r, 2.0 * apq)
     zero = den == 0  # a_pq = 0 <= d: swap (0 = d = r: nothing to do)
     big = 1.0 / eps(app.dtype) ** 2  # c ~ eps^2: a swap to well below the rounding level
     swap = select(num == 0, 0.0, -big, num.dtype)
-    t = jnp.where(zero, swap, num) / jnp.where(zero, 1.0, den)
-    t = jnp.clip(t, -big, big)  # a_pq tiny but not 0: t^2 must not overflow (c = s = 0)
+    t = where(zero, swap, num) / where(zero, 1.0, den)
+    # a_pq tiny but not 0: t^2 must not overflow (c = s = 0)
+    t = jnp.minimum(jnp.maximum(t, -big), big)
     c = rsqrt_shared(1.0 + t * t)
     return c, t * c
 
@@ -154,10 +156,10 @@ def _unit_or(w, fallback):
     reciprocal could overflow (NaN there for `fallback=None`)."""
     n = dot3(w, w)
     ok = n >= jnp.finfo(n.dtype).tiny  # NaN is not
-    inv = rsqrt_shared(jnp.where(ok, n, 1.0))
+    inv = rsqrt_shared(where(ok, n, 1.0))
     if fallback is None:
         fallback = [jnp.full_like(n, jnp.nan)] * 3
-    return [jnp.where(ok, x * inv, f) for x, f in zip(w, fallback, strict=True)]
+    return [where(ok, x * inv, f) for x, f in zip(w, fallback, strict=True)]
 
 
 def _perpendicular(u):
@@ -168,9 +170,9 @@ def _perpendicular(u):
     k1 = ~k0 & (a[1] <= a[2])
     zero = jnp.zeros_like(u[0])
     p = [
-        jnp.where(k0, zero, jnp.where(k1, -u[2], u[1])),
-        jnp.where(k0, u[2], jnp.where(k1, zero, -u[0])),
-        jnp.where(k0, -u[1], jnp.where(k1, u[0], zero)),
+        where(k0, zero, where(k1, -u[2], u[1])),
+        where(k0, u[2], where(k1, zero, -u[0])),
+        where(k0, -u[1], where(k1, u[0], zero)),
     ]
     inv = rsqrt_shared(dot3(p, p))
     return [x * inv for x in p]
@@ -224,7 +226,7 @@ def _polar(B, nan_at_zero=True):
     c, n = select_column(*k4_columns(entries), pick=masks_once)
     flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
     inv = rsqrt(n)
-    k = jnp.where(flip, -inv, inv)
+    k = where(flip, -inv, inv)
     q = jnp.moveaxis(jnp.stack(c, axis=0) * k[None], 0, -1)  # one transposing loop, as before
     s = jnp.stack([dot3(ua, wa), dot3(ub, wb), dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)

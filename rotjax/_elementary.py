@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import exponent_scale, select
+from ._numerics import exponent_scale, select, signbit, where
 
 # Newton's iteration for 1/sqrt(x): the integer type that reinterprets the float's bits, the
 # magic constant of the initial guess (relative error at most 3.4%), and the number of steps
@@ -163,7 +163,7 @@ def _sin_cos_xla(a):
 
 def _sin_cos_poly(a):
     size = jnp.dtype(a.dtype).itemsize
-    j = jnp.round(a * (2 / np.pi))
+    j = jax.lax.round(a * (2 / np.pi), jax.lax.RoundingMethod.TO_NEAREST_EVEN)  # no nested jit
     p1, p2, p3 = _PIO2[size]
     r = ((a - j * p1) - j * p2) - j * p3
     s = r * r
@@ -171,10 +171,10 @@ def _sin_cos_poly(a):
     cos_r = (1 - 0.5 * s) + (s * s) * horner(_COS_Q[size], s)
     quadrant = j - 4 * jnp.floor(0.25 * j)  # 0, 1, 2, 3 (exact)
     odd = (quadrant == 1) | (quadrant == 3)
-    sin_a = jnp.where(odd, cos_r, sin_r)
-    cos_a = jnp.where(odd, sin_r, cos_r)
-    sin_a = jnp.where(quadrant >= 2, -sin_a, sin_a)
-    cos_a = jnp.where((quadrant == 1) | (quadrant == 2), -cos_a, cos_a)
+    sin_a = where(odd, cos_r, sin_r)
+    cos_a = where(odd, sin_r, cos_r)
+    sin_a = where(quadrant >= 2, -sin_a, sin_a)
+    cos_a = where((quadrant == 1) | (quadrant == 2), -cos_a, cos_a)
     return sin_a, cos_a
 
 
@@ -264,7 +264,7 @@ def atan2(y, x):
 
 
 def _atan2_xla(y, x):
-    return jnp.where((x == 0) & (y == 0), jnp.zeros_like(x), jnp.arctan2(y, x))
+    return where((x == 0) & (y == 0), jnp.zeros_like(x), jnp.arctan2(y, x))
 
 
 def _atan2_poly(y, x):
@@ -272,36 +272,36 @@ def _atan2_poly(y, x):
     ax, ay = jnp.abs(x), jnp.abs(y)
     swap = ay > ax
     # where, not jnp.minimum/maximum: a NaN operand must reach the result.
-    mn, mx = jnp.where(swap, ax, ay), jnp.where(swap, ay, ax)
+    mn, mx = where(swap, ax, ay), where(swap, ay, ax)
     big = mn > _TAN_PI_8 * mx
-    num = jnp.where(big, mn - mx, mn)
-    den = jnp.where(big, mn + mx, mx)
+    num = where(big, mn - mx, mn)
+    den = where(big, mn + mx, mx)
     # A reciprocal and a product rather than one division (one more rounding, +0.1 ulp on
     # average): u is used several times below, and XLA:CPU materialises a division with several
     # uses in a loop of its own, while the product fuses (one pass over memory fewer).
-    u = num * (1 / jnp.where(den == 0, 1, den))  # x = y = 0: u = 0
+    u = num * (1 / where(den == 0, 1, den))  # x = y = 0: u = 0
     s = u * u
     p = jnp.full_like(s, _ATAN_P[size][0])
     for c in _ATAN_P[size][1:]:
         p = p * s + c
     r = u + u * (s * p)
-    xneg = jnp.signbit(x)
-    k = jnp.where(big, 1, 0)
-    k = jnp.where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
-    k = jnp.where(xneg, 4 - k, k)  # pi - (...) for x < 0
+    xneg = signbit(x)
+    k = select(big, 1, 0, jnp.int32)
+    k = where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
+    k = where(xneg, 4 - k, k)  # pi - (...) for x < 0
     sign = select(swap != xneg, -1, 1, x.dtype)
     hi, lo = _QUARTER_PI[size]
 
     def octant(vals):
         vals = [jnp.asarray(c, x.dtype) for c in vals]  # exact: rounded to this dtype
-        v = jnp.where(k == 1, vals[1], vals[0])
-        v = jnp.where(k == 2, vals[2], v)
-        v = jnp.where(k == 3, vals[3], v)
-        return jnp.where(k == 4, vals[4], v)
+        v = where(k == 1, vals[1], vals[0])
+        v = where(k == 2, vals[2], v)
+        v = where(k == 3, vals[3], v)
+        return where(k == 4, vals[4], v)
 
     a = octant(hi) + (octant(lo) + sign * r)
-    a = jnp.where(jnp.signbit(y), -a, a)
-    return jnp.where((ax == 0) & (ay == 0), jnp.zeros_like(a), a)
+    a = where(signbit(y), -a, a)
+    return where((ax == 0) & (ay == 0), jnp.zeros_like(a), a)
 
 
 @atan2.defjvp
@@ -314,8 +314,8 @@ def _atan2_jvp(primals, tangents):
     xs, ys, s, _ = scaled_pair(x, y)
     r2 = xs * xs + ys * ys
     zero = r2 == 0
-    r = rsqrt(jnp.where(zero, 1.0, r2))
-    return atan2(y, x), (xs * dy - ys * dx) * jnp.where(zero, 0.0, s * (r * r))
+    r = rsqrt(where(zero, 1.0, r2))
+    return atan2(y, x), (xs * dy - ys * dx) * where(zero, 0.0, s * (r * r))
 
 
 def scaled_pair(u, v):

@@ -28,6 +28,7 @@ from ._numerics import (
     stack_matrix,
     to_scalar_last,
     unstack,
+    where,
 )
 from ._quaternion import quat_multiply
 from ._shepperd import entries
@@ -162,7 +163,7 @@ def _hypot(u, v):
     zero = sq == 0
     # sq rsqrt(sq), not jnp.sqrt: XLA computes a root read by several slots of a stacked
     # result in a loop of its own, which reads the input again; this form fuses.
-    return jnp.where(zero, 0.0, sq * rsqrt(jnp.where(zero, 1.0, sq))) * inv
+    return where(zero, 0.0, sq * rsqrt(where(zero, 1.0, sq))) * inv
 
 
 @functools.cache
@@ -245,8 +246,8 @@ def _substitute(abcd, locks):
     """At exact lock, the zero factor replaced by (the conjugate of) the other (see above)."""
     a, b, c, d = abcd
     lock_sum, lock_diff, flip = locks
-    c, d = jnp.where(lock_sum, a, c), jnp.where(lock_sum, flip * b, d)
-    a, b = jnp.where(lock_diff, c, a), jnp.where(lock_diff, flip * d, b)
+    c, d = where(lock_sum, a, c), where(lock_sum, flip * b, d)
+    a, b = where(lock_diff, c, a), where(lock_diff, flip * d, b)
     return a, b, c, d
 
 
@@ -288,8 +289,8 @@ def _quat_to_euler_stacked(q, seq):
     # The substitution makes the zeroed (last) angle an atan2 of (x - x, ...), which a fused
     # multiply-add can leave at a rounding error instead of 0: it is set exactly.
     last = _slots(num, (0, 0, 1)) == 1
-    out = jnp.where(last & (locks[0] | locks[1]), 0.0, out)
-    return jnp.where(bad, jnp.nan, out)
+    out = where(last & (locks[0] | locks[1]), 0.0, out)
+    return where(bad, jnp.nan, out)
 
 
 @functools.cache
@@ -326,7 +327,7 @@ def _euler_jacobian(comps, seq):
     def inv_modulus(u, v):  # 1 / |(u, v)| for a scaled pair, 0 at the origin (double where)
         m2 = u * u + v * v
         zero = m2 == 0
-        return jnp.where(zero, 0.0, rsqrt(jnp.where(zero, 1.0, m2)))
+        return where(zero, 0.0, rsqrt(where(zero, 1.0, m2)))
 
     # Reciprocals and roots by rsqrt (multiplications and additions: see its note): each sum
     # of squares below is at least 1 (a scaled pair, or q scaled by _factors), so every
@@ -350,9 +351,9 @@ def _euler_jacobian(comps, seq):
         parts = [f * parts[n] if f != 1 else parts[n] for n, f in zip(order, factor, strict=True)]
         # The angle set to 0 at lock: the substitution already makes its J cancel exactly,
         # unless a fused multiply-add rounds the two halves differently (as in the forward).
-        parts[2] = jnp.where(locked, 0.0, parts[2])
+        parts[2] = where(locked, 0.0, parts[2])
         for k in range(3):
-            jac[k].append(jnp.where(bad, 0.0, parts[k]))
+            jac[k].append(where(bad, 0.0, parts[k]))
     return jac
 
 

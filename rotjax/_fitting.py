@@ -41,6 +41,7 @@ from ._numerics import (
     to_scalar_last,
     unstack,
     unstack_matrix,
+    where,
 )
 from ._quaternion import quat_conjugate, quat_multiply, quat_normalize
 from ._rotvec import quat_to_rotvec, rotvec_to_quat
@@ -147,7 +148,7 @@ def geodesic_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
     c = 0.5 * (jnp.trace(M, axis1=-2, axis2=-1) - 1)
     s = safe_norm(axial(M))
     # atan2 of an infinite sine is a finite pi/2: an infinite component gives NaN instead.
-    return cast(jnp.where(jnp.isfinite(s) & jnp.isfinite(c), atan2(s, c), jnp.nan), dt)
+    return cast(where(jnp.isfinite(s) & jnp.isfinite(c), atan2(s, c), jnp.nan), dt)
 
 
 @public
@@ -458,7 +459,7 @@ def quaternion_mean(
     M = _sum_outer(qw, q, (), ())
     v = top_eigenvector(M)
     if weights is not None:
-        v = jnp.where(jnp.all(weights == 0, axis=-1, keepdims=True), jnp.nan, v)
+        v = where(jnp.all(weights == 0, axis=-1, keepdims=True), jnp.nan, v)
     return cast(from_scalar_last(v, scalar_first), dt)  # w >= 0
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._numerics import jit, matvec
+from ._numerics import jit, matvec, where
 from ._quaternion import quaternion_conjugate, quaternion_multiply
 from ._rotation import Rotation, float_array, host_value
 from ._rotvec import quaternion_to_rotvec, rotvec_to_quaternion
@@ -153,7 +153,7 @@ def _slerp_eval(times, timedelta, quat, rotvecs, t):
     n = times.shape[0]
     idx = jnp.clip(jnp.searchsorted(times, t, side="right") - 1, 0, n - 2)
     alpha = (t - times[idx]) / timedelta[idx]
-    alpha = jnp.where((t < times[0]) | (t > times[-1]), jnp.nan, alpha)
+    alpha = where((t < times[0]) | (t > times[-1]), jnp.nan, alpha)
     step = rotvec_to_quaternion(alpha[..., None] * rotvecs[idx])
     return quaternion_multiply(quat[idx], step)
 
@@ -193,7 +193,7 @@ def _spline_coefficients(times, quat):
     # Equal keyframes: exactly 0 (a fused multiply-add leaves an ulp in conj(q) * q), so that a
     # constant attitude has exactly zero rates; the derivative is that of r.
     same = jnp.all(quat[:-1] == quat[1:], axis=-1, keepdims=True)
-    r = jnp.where(same, r - jax.lax.stop_gradient(r), r)
+    r = where(same, r - jax.lax.stop_gradient(r), r)
     n = r.shape[0]  # segments
     w_first, w_last = r[0] / h[0], r[-1] / h[-1]
     B, A = so3_right_jacobian(r), so3_right_jacobian_inverse(r)

@@ -17,6 +17,7 @@ from ._numerics import (
     public,
     stack,
     sum_squares,
+    where,
 )
 from ._shepperd import entries, k4_columns, select_column
 
@@ -50,7 +51,7 @@ def _homogeneous_k(R):
     r, f2, ok, s = _prescaled_matrix(R)
     h = f2 / 3  # in [1/12, 12] after the prescaling: rsqrt's domain
     y = rsqrt(h)
-    cols, diag = k4_columns(r, jnp.where(ok, h * y, jnp.nan))
+    cols, diag = k4_columns(r, where(ok, h * y, jnp.nan))
     return cols, diag, (h, y, s)
 
 
@@ -67,7 +68,7 @@ def shepperd_column(R):
     any norm and whose readers prescale) or any consumer that does not need a unit quaternion.
     NaN for a non-rotation, as the column."""
     c, _ = selected_column(R)
-    return stack([jnp.where(c[3] < 0, -x, x) for x in c])
+    return stack([where(c[3] < 0, -x, x) for x in c])
 
 
 def _hemisphere_scale(v, sq):
@@ -75,7 +76,7 @@ def _hemisphere_scale(v, sq):
     negated where ``w < 0``: ``v * scale`` is the unit quaternion with ``w >= 0``. :func:`rsqrt`
     (multiplications and additions only) fuses into the loop that writes the components."""
     s = rsqrt(sq)
-    return jnp.where(v[3] < 0, -s, s)
+    return where(v[3] < 0, -s, s)
 
 
 def _shepperd(R):

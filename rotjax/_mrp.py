@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
@@ -19,6 +18,7 @@ from ._numerics import (
     sum_squares,
     to_scalar_last,
     unstack,
+    where,
 )
 from ._quaternion import scaled_vector_part
 
@@ -104,11 +104,11 @@ def mrp_to_quaternion(mrp: ArrayLike, scalar_first: bool = False) -> Array:
     outer = sum_squares(p) > 1
     s, _ = exponent_scale(*p)
     u = [x * s for x in p]
-    r = rsqrt(jnp.where(outer, sum_squares(u), 1.0))  # double where; |s p|^2 is in [1, 12)
+    r = rsqrt(where(outer, sum_squares(u), 1.0))  # double where; |s p|^2 is in [1, 12)
     f = -s * (r * r)
-    p = [jnp.where(outer, x * f, y) for x, y in zip(u, p, strict=True)]
+    p = [where(outer, x * f, y) for x, y in zip(u, p, strict=True)]
     p2 = sum_squares(p)  # at most 1
     r = rsqrt(1 + p2)
-    k = jnp.where(outer, -(r * r), r * r)
+    k = where(outer, -(r * r), r * r)
     q = [(2 * k) * x for x in p] + [(1 - p2) * k]
     return cast(from_scalar_last(stack(q), scalar_first), dt)

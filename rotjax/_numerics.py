@@ -117,6 +117,13 @@ def max_abs_bits(*xs):
     return pairwise(jnp.maximum, bits)
 
 
+def signbit(x):
+    """`jnp.signbit(x)` of a float array (true for -0.0 and a negative NaN), from the sign of
+    its bits read as a signed integer: one comparison, without `jnp.signbit`'s nested `jit`."""
+    ity = {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}[jnp.dtype(x.dtype).itemsize]
+    return jax.lax.bitcast_convert_type(x, ity) < 0
+
+
 def float_bits(value, dtype):
     """The bits of the float `value` (not negative) in `dtype`, as a Python integer."""
     ity = {4: np.int32, 8: np.int64}[np.dtype(dtype).itemsize]
@@ -140,7 +147,7 @@ def exponent_scale_of_bits(bits, dtype):
 
 def _marked(bits, s, dtype):
     """`s`, NaN where the magnitude `bits` are those of zero, infinity or NaN."""
-    return jnp.where((bits > 0) & (bits < float_bits(np.inf, dtype)), s, jnp.nan)
+    return where((bits > 0) & (bits < float_bits(np.inf, dtype)), s, jnp.nan)
 
 
 def exponent_scale(*xs, mark=False):
@@ -171,15 +178,39 @@ def unit_scale(*xs, mark=False):
     dt = xs[0].dtype
     bits = max_abs_bits(*xs)
     s, _ = exponent_scale_of_bits(bits, dt)
-    s = jnp.where((bits >= float_bits(0.5, dt)) & (bits < float_bits(2.0, dt)), jnp.ones_like(s), s)
+    s = where((bits >= float_bits(0.5, dt)) & (bits < float_bits(2.0, dt)), jnp.ones_like(s), s)
     return _marked(bits, s, dt) if mark else s
+
+
+def where(condition, x, y):
+    """`jnp.where(condition, x, y)`, written as one `lax.select`: `jnp.where` is a nested `jit`
+    (its array conversions and broadcasts too), which adds a function to the program at every
+    call, hundreds in a conversion's gradient, for JAX to trace and lower and XLA to inline.
+    The same promotion (a Python number takes the array's type) and broadcasting; for two
+    numbers, :func:`select` (which names the type)."""
+    if not any(isinstance(v, (jax.Array, np.ndarray)) for v in (x, y)):
+        raise TypeError("where: x or y must be an array; for two numbers use select")
+    dt = jnp.result_type(x, y)
+    shape = jnp.broadcast_shapes(*(np.shape(v) for v in (condition, x, y)))
+
+    def operand(v, dtype):
+        if not isinstance(v, (jax.Array, np.ndarray)):
+            return jax.lax.full(shape, v, dtype)
+        v = jax.lax.convert_element_type(v, dtype) if v.dtype != dtype else v
+        if v.shape == shape:
+            return v
+        return jax.lax.broadcast_in_dim(v, shape, tuple(range(len(shape) - v.ndim, len(shape))))
+
+    if jnp.result_type(condition) != jnp.bool_:
+        condition = jnp.asarray(condition) != 0
+    return jax.lax.select(operand(condition, jnp.bool_), operand(x, dt), operand(y, dt))
 
 
 def select(cond, a, b, dtype):
     """`jnp.where(cond, a, b)` for Python numbers `a` and `b`, as an array of `dtype`.
     On two Python numbers `jnp.where` makes an array of the default type, float64 with x64 on,
     which a float32 program would then compute and convert in every loop that reads it."""
-    return jnp.where(cond, jnp.asarray(a, dtype), jnp.asarray(b, dtype))
+    return where(cond, jnp.asarray(a, dtype), jnp.asarray(b, dtype))
 
 
 def pairwise(op, xs):
@@ -300,7 +331,7 @@ def spread(x, k):
     computes such a value in a loop of its own when it is too long to copy into each reader
     (quaternion_to_euler's power-of-two scale was)."""
     col = jax.lax.broadcasted_iota(jnp.int32, (*jnp.shape(x), k), jnp.ndim(x))
-    return jnp.where(col == k, jnp.zeros((), x.dtype), x[..., None])
+    return where(col == k, jnp.zeros((), x.dtype), x[..., None])
 
 
 def per_slot(parts):
@@ -309,7 +340,7 @@ def per_slot(parts):
     col = jax.lax.broadcasted_iota(jnp.int32, parts[0].shape, parts[0].ndim - 1)
     out = parts[-1]
     for i in range(len(parts) - 2, -1, -1):
-        out = jnp.where(col == i, parts[i], out)
+        out = where(col == i, parts[i], out)
     return out
 
 
@@ -319,7 +350,7 @@ def _select_stack(parts):
     col = jax.lax.broadcasted_iota(jnp.int32, (*parts[0].shape, k), parts[0].ndim)
     out = jnp.broadcast_to(parts[-1][..., None], col.shape)
     for i in range(k - 2, -1, -1):
-        out = jnp.where(col == i, parts[i][..., None], out)
+        out = where(col == i, parts[i][..., None], out)
     return out
 
 
@@ -380,7 +411,7 @@ def _components(x):
     (slices transpose to pads, and a leading axis to a transposing copy of its own)."""
     k = x.shape[-1]
     col = jax.lax.broadcasted_iota(jnp.int32, (1,) * (x.ndim - 1) + (k,), x.ndim - 1)
-    return [jnp.sum(jnp.where(col == i, x, 0.0), axis=-1) for i in range(k)]
+    return [jnp.sum(where(col == i, x, 0.0), axis=-1) for i in range(k)]
 
 
 def shared_tangent(parts):
@@ -407,7 +438,7 @@ def safe_norm(x, axis=-1):
     """
     sq = jnp.sum(x * x, axis=axis)
     zero = sq == 0
-    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))  # double where
+    return where(zero, 0.0, jnp.sqrt(where(zero, 1.0, sq)))  # double where
 
 
 def cross(a, b):
@@ -653,4 +684,4 @@ TIE_ULPS = 64.0
 def safe_div(num, den, tol):
     """`num / den` where `|den| > tol`, else 0 (double where: the gradient stays finite)."""
     small = jnp.abs(den) <= tol
-    return jnp.where(small, 0.0, num / jnp.where(small, 1.0, den))
+    return where(small, 0.0, num / where(small, 1.0, den))

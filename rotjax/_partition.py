@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from ._numerics import as_float, eps, public
+from ._numerics import as_float, eps, public, where
 
 
 class Partition(NamedTuple):
@@ -48,7 +48,7 @@ def _swap(x, i, j, axis):
     size = x.shape[axis]
     idx = jnp.arange(size).reshape((1,) * j.ndim + (size,))
     jj = j[..., None]
-    perm = jnp.where(idx == i, jj, jnp.where(idx == jj, i, idx))  # (..., size)
+    perm = where(idx == i, jj, where(idx == jj, i, idx))  # (..., size)
     if axis == -2:
         return jnp.take_along_axis(x, perm[..., :, None], axis=-2)
     if x.ndim == perm.ndim:
@@ -69,7 +69,7 @@ def _eliminate(A, rows, cols):
     pivots = []
     for p in range(m):
         # Largest |entry| of the remaining submatrix A[p:, p:] (first one on ties).
-        score = jnp.where((r_idx >= p) & (c_idx >= p), jnp.abs(A), -1.0)
+        score = where((r_idx >= p) & (c_idx >= p), jnp.abs(A), -1.0)
         flat = jnp.argmax(score.reshape(*A.shape[:-2], m * n), axis=-1)
         r, c = flat // n, flat % n
         A = _swap(_swap(A, p, r, -2), p, c, -1)
@@ -79,8 +79,8 @@ def _eliminate(A, rows, cols):
         # Double where: a zero pivot (a rank-deficient remainder) must not send inf or NaN
         # into the values or the gradient; its multipliers are then 0.
         zero = piv == 0
-        mult = A[..., p + 1 :, p] / jnp.where(zero, 1.0, piv)[..., None]
-        mult = jnp.where(zero[..., None], 0.0, mult)
+        mult = A[..., p + 1 :, p] / where(zero, 1.0, piv)[..., None]
+        mult = where(zero[..., None], 0.0, mult)
         below = A[..., p + 1 :, :] - mult[..., :, None] * A[..., p : p + 1, :]
         below = below.at[..., :, p].set(0.0)
         A = jnp.concatenate([A[..., : p + 1, :], below], axis=-2)
@@ -152,9 +152,9 @@ def partition_coordinates(jacobian: ArrayLike, tol: float | None = None) -> Part
     # H = -U1^-1 U2 by back substitution, with the rows beyond the rank replaced by identity
     # rows and a zero right-hand side (those dependent coordinates held fixed), then set NaN.
     eye = jnp.eye(m, dtype=A.dtype).reshape((1,) * len(batch) + (m, m))
-    U1 = jnp.where(keep[..., :, None], U[..., :, :m], eye)
-    U2 = jnp.where(keep[..., :, None], U[..., :, m:], 0.0)
+    U1 = where(keep[..., :, None], U[..., :, :m], eye)
+    U2 = where(keep[..., :, None], U[..., :, m:], 0.0)
     H = -jax.lax.linalg.triangular_solve(U1, U2, left_side=True, lower=False)
-    H = jnp.where(keep[..., :, None], H, jnp.nan)
-    H = jnp.where(jnp.any(jnp.isnan(A), axis=(-2, -1))[..., None, None], jnp.nan, H)
+    H = where(keep[..., :, None], H, jnp.nan)
+    H = where(jnp.any(jnp.isnan(A), axis=(-2, -1))[..., None, None], jnp.nan, H)
     return Partition(cols[..., :m], cols[..., m:], H.astype(dt), rank)

@@ -31,6 +31,7 @@ from ._numerics import (
     to_scalar_last,
     unit_scale,
     unstack,
+    where,
 )
 
 
@@ -212,11 +213,11 @@ def quat_angle(q, bounded=False):
     s, inv = exponent_scale(x, y, z)
     m2 = sum_squares([x * s, y * s, z * s])
     zero = m2 == 0
-    n = jnp.where(zero, 0.0, m2 * rsqrt(jnp.where(zero, 1.0, m2))) * inv
+    n = where(zero, 0.0, m2 * rsqrt(where(zero, 1.0, m2))) * inv
     # NaN for the zero quaternion: atan2(0, 0) = 0 would pass for the identity; and for an
     # infinite component, where atan2 would return a finite angle.
     bad = ((n == 0) & (w == 0)) | ~jnp.isfinite(n + w)
-    return jnp.where(bad, jnp.nan, 2 * atan2(n, w))
+    return where(bad, jnp.nan, 2 * atan2(n, w))
 
 
 @public

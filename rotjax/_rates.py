@@ -44,6 +44,7 @@ from ._numerics import (
     to_scalar_last,
     unit_scale,
     unstack,
+    where,
 )
 from ._quaternion import quat_conjugate, quat_multiply
 
@@ -159,16 +160,16 @@ def _inverse_rates(a, omega, seq, frame, damping):
     damped = damping > 0
     # Exact closed form (1/cos or 1/sin of the middle angle). Double where: where the damped
     # branch is selected, h may be 0 and A / h would send NaN into its gradient.
-    h_safe = jnp.where(damped, 1.0, h)
+    h_safe = where(damped, 1.0, h)
     x0_exact = A / h_safe
     x2_exact = B - g * x0_exact
     d2 = damping * damping
-    den = jnp.where(damped, h * h + d2 * (2 + d2), 1.0)  # > 0 where used
+    den = where(damped, h * h + d2 * (2 + d2), 1.0)  # > 0 where used
     x0_damped = ((1 + d2) * h * A + d2 * g * B) / den
     x2_damped = ((h * h + d2) * B - g * h * A) / den
-    x0 = jnp.where(damped, x0_damped, x0_exact)
+    x0 = where(damped, x0_damped, x0_exact)
     x1 = v[j] / (1 + d2)
-    x2 = jnp.where(damped, x2_damped, x2_exact)
+    x2 = where(damped, x2_damped, x2_exact)
     out = jnp.stack([x0, x1, x2], axis=-1)
     return out[..., ::-1] if reverse else out
 

@@ -32,6 +32,7 @@ from ._numerics import (
     unit_scale,
     unstack,
     unstack_matrix,
+    where,
 )
 from ._quaternion import (
     quat_conjugate,
@@ -90,7 +91,7 @@ def _pose_from_matrix(m, normalize):
         # The mask on the inputs (the projection of NaN is NaN): in reverse mode it then masks
         # the cotangent once, where it is written, rather than inside each loop of the
         # projection's derivative, which recomputed the determinant in each.
-        e = [jnp.where(ok, x, jnp.nan) for x in e]
+        e = [where(ok, x, jnp.nan) for x in e]
     r = stack_matrix([e[0:3], e[4:7], e[8:11]])
     t = stack([e[3], e[7], e[11]])
     if r.size == 0:  # an empty batch (the eigen kernel cannot reshape one)
@@ -158,12 +159,12 @@ def _normalize_dq(real, dual):
     # underflow (the result does not depend on that factor).
     big = max_abs(*jnp.moveaxis(real, -1, 0))
     zero = (big == 0)[..., None]
-    scale = jnp.where(zero, jnp.ones_like(real[..., :1]), unit_scale(big)[..., None])
+    scale = where(zero, jnp.ones_like(real[..., :1]), unit_scale(big)[..., None])
     real, dual = real * scale, dual * scale
     n2 = jnp.sum(real * real, axis=-1, keepdims=True)
     ident = jnp.zeros_like(real).at[..., 3].set(1)
-    real = jnp.where(zero, ident, real)
-    inv = rsqrt(jnp.where(zero, jnp.ones_like(n2), n2))  # double where; n2 in [1, 4)
+    real = where(zero, ident, real)
+    inv = rsqrt(where(zero, jnp.ones_like(n2), n2))  # double where; n2 in [1, 4)
     real, dual = real * inv, dual * inv
     return real, dual - jnp.sum(real * dual, axis=-1, keepdims=True) * real
 
@@ -191,7 +192,7 @@ def _mean(q, t, w):
     ``w`` ``(..., N)`` or ``None``; a negative weight gives NaN for its set."""
     if w is None:
         return quaternion_mean(q), jnp.mean(t, axis=-2)
-    w = jnp.where(w < 0, jnp.nan, w)
+    w = where(w < 0, jnp.nan, w)
     tm = jnp.sum(w[..., None] * t, axis=-2) / jnp.sum(w, axis=-1)[..., None]
     return quaternion_mean(q, w), tm
 

@@ -40,6 +40,7 @@ from ._numerics import (
     jit,
     to_scalar_last,
     unstack_matrix,
+    where,
 )
 from ._quaternion import (
     angle_between,
@@ -98,7 +99,7 @@ def constructor_input(x):
 def _from_matrix_checked(matrix):
     # scipy raises for det <= 0; a traced function cannot, so those rotations are NaN.
     q = matrix_to_quaternion(matrix, method="optimal")
-    return jnp.where((det3(unstack_matrix(matrix)) > 0)[..., None], q, jnp.nan)
+    return where((det3(unstack_matrix(matrix)) > 0)[..., None], q, jnp.nan)
 
 
 @jit(static_argnames="scalar_first")
@@ -1262,7 +1263,7 @@ class Rotation(BatchedPytree):
                     "Expected `weights` to be broadcastable to rotation shape, got shape "
                     f"{w.shape} for {q.shape[:-1]} rotations."
                 ) from None
-            w = jnp.where(w < 0, jnp.nan, w)
+            w = where(w < 0, jnp.nan, w)
             w = jnp.reshape(jnp.transpose(w, keep + axes), [q.shape[i] for i in keep] + [-1])
         qt = jnp.transpose(q, keep + axes + (nb,))
         qt = jnp.reshape(qt, [q.shape[i] for i in keep] + [-1, 4])
@@ -1318,9 +1319,9 @@ def _align_primary(a, b, w):
     n = a.shape[0]
     inf = jnp.isinf(w) | (n == 1)
     bad = (jnp.sum(jnp.isinf(w)) > 1) | jnp.any(w < 0)
-    w_fin = jnp.where(inf, 0.0, w)
+    w_fin = where(inf, 0.0, w)
     # Least squares over all pairs (used when no weight is infinite).
-    q_svd = _align_vectors(a, b, jnp.where(jnp.isinf(w), 1.0, w))
+    q_svd = _align_vectors(a, b, where(jnp.isinf(w), 1.0, w))
     # The primary pair, aligned exactly by the smallest rotation.
     k = jnp.argmax(inf)
     ap, bp = a[k], b[k]
@@ -1334,8 +1335,8 @@ def _align_primary(a, b, w):
     # a gives a well-conditioned cross product.
     e = jnp.eye(3, dtype=a.dtype)[jnp.argmin(jnp.abs(ap))]
     anti = c < jnp.finfo(a.dtype).tiny
-    vec = jnp.where(anti, cross(ap, e), cross(bp, sv))
-    q_pri = quaternion_normalize(jnp.concatenate([vec, jnp.where(anti, 0.0, c)[None]]))
+    vec = where(anti, cross(ap, e), cross(bp, sv))
+    q_pri = quaternion_normalize(jnp.concatenate([vec, where(anti, 0.0, c)[None]]))
     # The rotation about a_p that best aligns the secondary pairs (scipy's 2-D problem).
     cs = quaternion_apply(jnp.broadcast_to(q_pri, (n, 4)), b)
     apn = ap[None, :]
@@ -1343,14 +1344,14 @@ def _align_primary(a, b, w):
     cos = jnp.sum(cs * a, axis=-1) - jnp.sum(cs * apn, axis=-1) * jnp.sum(a * apn, axis=-1)
     phi = atan2(jnp.sum(w_fin * sin), jnp.sum(w_fin * cos))
     q_fix = quaternion_multiply(rotvec_to_quaternion(phi * ap), q_pri)
-    q = jnp.where(jnp.any(inf), q_fix, q_svd)
-    q = jnp.where(bad, jnp.nan, q)
+    q = where(jnp.any(inf), q_fix, q_svd)
+    q = where(bad, jnp.nan, q)
     d = a - quaternion_apply(jnp.broadcast_to(q, (n, 4)), b)
     # A single finite-weight pair keeps its weight in the residual (scipy's rule).
     w_res = w if n == 1 else w_fin
-    w_res = jnp.where(jnp.isinf(w_res), 0.0, w_res)
+    w_res = where(jnp.isinf(w_res), 0.0, w_res)
     ss = jnp.sum(w_res * jnp.sum(d * d, axis=-1))
     pos = ss > 0
-    rssd = jnp.where(pos, jnp.sqrt(jnp.where(pos, ss, 1.0)), 0.0)  # cone at 0: gradient 0 there
-    rssd = jnp.where(jnp.isnan(ss), jnp.nan, rssd)
+    rssd = where(pos, jnp.sqrt(where(pos, ss, 1.0)), 0.0)  # cone at 0: gradient 0 there
+    rssd = where(jnp.isnan(ss), jnp.nan, rssd)
     return q, rssd

@@ -23,6 +23,7 @@ from ._numerics import (
     stack,
     to_scalar_last,
     unstack,
+    where,
 )
 from ._quaternion import quat_angle, quat_prescaled, quat_to_matrix, scaled_vector_part
 
@@ -38,13 +39,13 @@ def exp_coeffs(theta2):
     Multiplications, additions and selects only (`rsqrt`, `sin_cos`), so that a conversion
     built on them is one fused loop."""
     small = _small(theta2)
-    safe = jnp.where(small, 1.0, theta2)  # any non-zero value keeps the gradient finite
+    safe = where(small, 1.0, theta2)  # any non-zero value keeps the gradient finite
     inv_t = rsqrt(safe)
     t = safe * inv_t
     t = t + (0.5 * inv_t) * (safe - t * t)  # one Newton step for sqrt: t to about 0.5 ulp
     sin_h, cos_h = sin_cos(0.5 * t)
-    k = jnp.where(small, 0.5 - theta2 / 48 + theta2 * theta2 / 3840, sin_h * inv_t)
-    c = jnp.where(small, 1 - theta2 / 8 + theta2 * theta2 / 384, cos_h)
+    k = where(small, 0.5 - theta2 / 48 + theta2 * theta2 / 3840, sin_h * inv_t)
+    c = where(small, 1 - theta2 / 8 + theta2 * theta2 / 384, cos_h)
     return k, c
 
 
@@ -90,10 +91,10 @@ def rotvec_scale(n2, w):
     aw = sign * w
     w2 = aw * aw
     near = n2 <= w2
-    inv_m = rsqrt(jnp.where(near, w2, n2))
-    u = jnp.where(near, n2, w2) * (inv_m * inv_m)
+    inv_m = rsqrt(where(near, w2, n2))
+    u = where(near, n2, w2) * (inv_m * inv_m)
     f = atan_ratio(u)
-    half = jnp.where(near, f, 0.5 * np.pi - aw * inv_m * f)  # atan2(n, |w|) * m / m
+    half = where(near, f, 0.5 * np.pi - aw * inv_m * f)  # atan2(n, |w|) * m / m
     return (2 * sign) * inv_m * half
 
 
@@ -315,7 +316,7 @@ def quaternion_to_axis_angle(
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     q = quat_prescaled(to_scalar_last(q, scalar_first))
-    q = jnp.where(q[..., 3:] < 0, -q, q)
+    q = where(q[..., 3:] < 0, -q, q)
     qv = q[..., :3]
     # The vector part scaled on its own (a power of two), so that a tiny one (1e-160 next to
     # w = 1) still gives its direction rather than underflowing to the identity's.
@@ -324,10 +325,10 @@ def quaternion_to_axis_angle(
     n = safe_norm(qv)
     ident = (n == 0)[..., None]
     e_x = jnp.asarray([1.0, 0.0, 0.0], dtype=q.dtype)
-    axis = jnp.where(ident, e_x, qv / jnp.where(ident, 1.0, n[..., None]))
+    axis = where(ident, e_x, qv / where(ident, 1.0, n[..., None]))
     angle = quat_angle(q)
     # NaN (not a valid-looking identity) for the zero quaternion or a non-finite component.
-    axis = jnp.where(jnp.isnan(angle)[..., None], jnp.nan, axis)
+    axis = where(jnp.isnan(angle)[..., None], jnp.nan, axis)
     if degrees:
         angle = jnp.rad2deg(angle)
     return cast(axis, dt), cast(angle, dt)

@@ -34,6 +34,7 @@ from ._numerics import (
     sum_squares,
     unstack,
     unstack_matrix,
+    where,
 )
 from ._quaternion import quat_to_matrix_parts, scaled_vector_parts
 from ._rotvec import exp_coeffs, rotvec_scale
@@ -82,11 +83,11 @@ def _series(x, series, closed):
     above it. Both branches see a harmless argument where they are not taken (double where), so
     neither sends inf or NaN into the derivatives."""
     small = x < _CUT
-    xs = jnp.where(small, x, 0.0)
+    xs = where(small, x, 0.0)
     out = 0.0
     for c in reversed(_terms(series, x.dtype)):  # Horner
         out = out * xs + c
-    return jnp.where(small, out, closed(jnp.where(small, _CUT, x)))
+    return where(small, out, closed(where(small, _CUT, x)))
 
 
 def _recip(x):

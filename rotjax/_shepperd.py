@@ -7,9 +7,10 @@ which builds on it and not the other way round. Every step is a per-rotation sca
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
-from ._numerics import sum_squares, unstack_matrix
+from ._numerics import sum_squares, unstack_matrix, where
 
 
 def entries(R):
@@ -55,9 +56,9 @@ def select(masks, vals):
     unlike a one-hot product it cannot turn ``0 * inf`` into NaN.
     """
     use_x, use_y, use_z = masks
-    v = jnp.where(use_z, vals[2], vals[3])
-    v = jnp.where(use_y, vals[1], v)
-    return jnp.where(use_x, vals[0], v)
+    v = where(use_z, vals[2], vals[3])
+    v = where(use_y, vals[1], v)
+    return where(use_x, vals[0], v)
 
 
 def masks(diag):
@@ -75,7 +76,8 @@ def masks_once(diag):
     a loop of its own. For a ``diag`` computed from rounded products: XLA recomputes such
     values in each loop that reads them, contracted into FMAs differently, and at a tie
     comparisons made again there can pick different columns for different components."""
-    k = jnp.argmax(jnp.stack(diag, axis=-1), axis=-1)
+    d = jnp.stack(diag, axis=-1)
+    k = jax.lax.argmax(d, d.ndim - 1, jnp.int32)  # jnp.argmax's, without its nested jit
     return k == 0, k == 1, k == 2
 
 

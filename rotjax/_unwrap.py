@@ -18,6 +18,7 @@ from ._numerics import (
     like_rank,
     public,
     select,
+    where,
 )
 
 # --- continuous Euler angles -------------------------------------------------------------------
@@ -85,15 +86,15 @@ def unwrap_euler(angles: ArrayLike, seq: str, axis: int = 0) -> Array:
         # finite sample is unwrapped against the last finite output (or passed through unchanged
         # if none came before). Double where: `prev` is made finite before the arithmetic.
         ok = jnp.all(jnp.isfinite(sample), axis=-1, keepdims=True)
-        ref = jnp.where(seen, prev, 0.0)
-        s = jnp.where(ok, sample, 0.0)
+        ref = where(seen, prev, 0.0)
+        s = where(ok, sample, 0.0)
         c1 = nearest(s, ref)
         c2 = nearest(offset + flip * s, ref)
         d1 = jnp.sum((c1 - ref) ** 2, axis=-1, keepdims=True)
         d2 = jnp.sum((c2 - ref) ** 2, axis=-1, keepdims=True)
-        out = jnp.where(seen, jnp.where(d2 < d1, c2, c1), s)
-        out = jnp.where(ok, out, sample)
-        return (jnp.where(ok, out, prev), seen | ok), out
+        out = where(seen, where(d2 < d1, c2, c1), s)
+        out = where(ok, out, sample)
+        return (where(ok, out, prev), seen | ok), out
 
     seen0 = jnp.zeros(x.shape[1:-1] + (1,), dtype=bool)
     _, y = jax.lax.scan(step, (jnp.zeros_like(x[0]), seen0), x)
@@ -158,11 +159,11 @@ def unwrap_quaternion(q: ArrayLike, axis: int = 0, scalar_first: bool = False) -
         return cast(jnp.moveaxis(x, 0, axis), dt)
     ok = jnp.all(jnp.isfinite(x), axis=-1)  # (T, ...)
     idx = jnp.arange(n).reshape((n,) + (1,) * (ok.ndim - 1))
-    last = jax.lax.cummax(jnp.where(ok, idx, -1), axis=0)  # last finite index <= k
+    last = jax.lax.cummax(where(ok, idx, -1), axis=0)  # last finite index <= k
     prev = jnp.concatenate([jnp.full_like(last[:1], -1), last[:-1]], axis=0)  # < k
     ref = jnp.take_along_axis(x, jnp.maximum(prev, 0)[..., None], axis=0)
-    dot = jnp.sum(jnp.where(ok[..., None], x, 0.0) * jnp.where(prev[..., None] >= 0, ref, 0.0), -1)
+    dot = jnp.sum(where(ok[..., None], x, 0.0) * where(prev[..., None] >= 0, ref, 0.0), -1)
     sign = select(dot < 0, -1.0, 1.0, x.dtype)
     flips = jnp.cumprod(sign, axis=0)
-    out = jnp.where(ok[..., None], x * flips[..., None], x)  # bad samples as given
+    out = where(ok[..., None], x * flips[..., None], x)  # bad samples as given
     return cast(jnp.moveaxis(out, 0, axis), dt)

@@ -12,7 +12,7 @@ from hypothesis.extra.numpy import arrays
 import rotjax as rj
 from rotjax._elementary import reciprocal, rsqrt
 from rotjax._matrix import selected_column
-from rotjax._numerics import exponent_scale, max_abs_bits, unit_scale
+from rotjax._numerics import exponent_scale, max_abs_bits, signbit, unit_scale, where
 
 # Exponent ranges of normal numbers, and the documented accuracy of rsqrt: the Newton form's on
 # the CPU, XLA's rsqrt elsewhere (a GPU's float32 rsqrt is within 2 ulp, CUDA's rsqrtf).
@@ -159,3 +159,35 @@ def test_other_backends_use_xla_operations():
             assert (f"stablehlo.{op}" in text) == present, (platform, op)
         text = export.export(jax.jit(reciprocal), platforms=[platform])(args[0]).mlir_module()
         assert ("stablehlo.divide" in text) == present, (platform, "reciprocal")
+
+
+_F32 = jnp.arange(6, dtype=jnp.float32).reshape(2, 3) - 2.5
+_WHERE_ARGS = {
+    "arrays": (_F32 > 0, _F32, -_F32),
+    "number and array": (_F32 > 0, 0.0, _F32),
+    "array and int": (_F32 > 0, _F32, 1),
+    "broadcast condition": (jnp.array([True, False, True]), _F32, 2.0 * _F32),
+    "broadcast value": (_F32 > 0, jnp.ones((3,), jnp.float32), _F32),
+    "non-bool condition": (jnp.arange(3), _F32, 0.0),
+}
+
+
+@pytest.mark.parametrize("name", list(_WHERE_ARGS))
+def test_where_is_jnp_where_without_a_nested_jit(name):
+    args = _WHERE_ARGS[name]
+    got, want = where(*args), jnp.where(*args)
+    assert (got.dtype, got.shape, got.weak_type) == (want.dtype, want.shape, want.weak_type)
+    np.testing.assert_array_equal(got, want)
+    text = jax.jit(lambda c: where(c, *args[1:])).lower(args[0]).as_text()
+    assert text.count("func.func") == 1
+
+
+def test_where_of_two_numbers_asks_for_their_type():
+    with pytest.raises(TypeError, match="select"):
+        where(_F32 > 0, 1.0, 0.0)
+
+
+@pytest.mark.parametrize("dtype", [jnp.bfloat16, jnp.float16, jnp.float32, jnp.float64])
+def test_signbit_is_jnp_signbit(dtype):
+    x = jnp.asarray([0.0, -0.0, 1.5, -1.5, jnp.inf, -jnp.inf, jnp.nan, -jnp.nan, 1e-40], dtype)
+    np.testing.assert_array_equal(signbit(x), jnp.signbit(x))

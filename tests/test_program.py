@@ -482,3 +482,34 @@ def test_function_chain_does_no_more_than_objects(name, dtype):
     what = f"{name} {np.dtype(dtype).name}"
     assert (f_loops, f_bytes) <= (o_loops, o_bytes), f"{what}: loops and bytes"
     assert f_flops <= o_flops, f"{what}: {f_flops:.0f} flops per rotation, objects {o_flops:.0f}"
+
+
+# Functions that JAX's lowering itself emits (a cached lowering rule), not a nested jit.
+_LOWERING_HELPERS = {"argmax"}
+
+
+def _nested_functions(f, shapes, dtype):
+    text = jax.jit(f).lower(*_args(shapes, dtype)).as_text()
+    names = {re.sub(r"_\d+$", "", n) for n in re.findall(r"func\.func \w+ @(\w+)", text)}
+    return names - {"main"} - _LOWERING_HELPERS
+
+
+_PROGRAMS = {
+    **{k: (v[0], v[1]) for k, v in CASES.items()},
+    **PROJECTING,
+    **{k: v[:2] for k, v in SUMMED.items()},
+    **COMPOSED,
+}
+
+
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=() if n in CASES else pytest.mark.slow) for n in _PROGRAMS]
+)
+def test_program_calls_no_nested_function(name):
+    """No program of rotjax calls a function of its own (a nested ``jit``, such as
+    ``jnp.where``'s): each is one more function for JAX to trace and lower and for XLA to
+    inline, hundreds in a conversion's gradient (see rotjax._numerics.where)."""
+    f, shapes = _PROGRAMS[name]
+    g, g_shapes, _ = _pullback(f, shapes, jnp.float32)
+    for what, h, s in (("forward", f, shapes), ("vjp", g, g_shapes)):
+        assert not _nested_functions(h, s, jnp.float32), f"{name} {what}"
