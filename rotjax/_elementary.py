@@ -286,7 +286,8 @@ def _atan2_poly(y, x):
         p = p * s + c
     r = u + u * (s * p)
     xneg = signbit(x)
-    k = select(big, 1, 0, jnp.int32)
+    # the octant index, an integer of x's width: the selects on it share the loop's vector lanes
+    k = select(big, 1, 0, {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}[x.dtype.itemsize])
     k = where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
     k = where(xneg, 4 - k, k)  # pi - (...) for x < 0
     sign = select(swap != xneg, -1, 1, x.dtype)
