@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import exponent_scale, select, signbit, where
+from ._numerics import exponent_scale, int_type, select, signbit, where
 
 # Newton's iteration for 1/sqrt(x): the integer type that reinterprets the float's bits, the
 # magic constant of the initial guess (relative error at most 3.4%), and the number of steps
@@ -57,12 +57,12 @@ def rsqrt_shared(x):
 
 
 def _rsqrt_newton(x):
-    int_type, magic, steps = _RSQRT_START[jnp.dtype(x.dtype)]
-    bits = jax.lax.bitcast_convert_type(x, int_type)
+    uint, magic, steps = _RSQRT_START[jnp.dtype(x.dtype)]
+    bits = jax.lax.bitcast_convert_type(x, uint)
     # Unsigned, so that the shift is a logical one: x86 has no vector arithmetic shift of
     # 64-bit integers before AVX-512, and a signed one made the float64 loops scalar.
-    half = jax.lax.shift_right_logical(bits, jnp.asarray(1, int_type))
-    y = jax.lax.bitcast_convert_type(jnp.asarray(magic, int_type) - half, x.dtype)
+    half = jax.lax.shift_right_logical(bits, jnp.asarray(1, uint))
+    y = jax.lax.bitcast_convert_type(jnp.asarray(magic, uint) - half, x.dtype)
     h = 0.5 * x
     for _ in range(steps - 1):
         y = y * (1.5 - h * y * y)
@@ -99,9 +99,9 @@ def reciprocal(x):
 
 
 def _reciprocal_newton(x):
-    int_type, magic, steps = _RECIPROCAL_START[jnp.dtype(x.dtype)]
-    bits = jax.lax.bitcast_convert_type(x, int_type)
-    y = jax.lax.bitcast_convert_type(jnp.asarray(magic, int_type) - bits, x.dtype)
+    uint, magic, steps = _RECIPROCAL_START[jnp.dtype(x.dtype)]
+    bits = jax.lax.bitcast_convert_type(x, uint)
+    y = jax.lax.bitcast_convert_type(jnp.asarray(magic, uint) - bits, x.dtype)
     for _ in range(steps):
         y = y + y * (1 - x * y)
     return y
@@ -286,8 +286,7 @@ def _atan2_poly(y, x):
         p = p * s + c
     r = u + u * (s * p)
     xneg = signbit(x)
-    # the octant index, an integer of x's width: the selects on it share the loop's vector lanes
-    k = select(big, 1, 0, {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}[x.dtype.itemsize])
+    k = select(big, 1, 0, int_type(x.dtype))  # the octant index (see int_type)
     k = where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
     k = where(xneg, 4 - k, k)  # pi - (...) for x < 0
     sign = select(swap != xneg, -1, 1, x.dtype)

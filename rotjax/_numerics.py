@@ -104,6 +104,13 @@ def from_scalar_last(q, scalar_first: bool):
     return jnp.roll(q, 1, axis=-1) if scalar_first else q
 
 
+def int_type(dtype):
+    """The signed integer type of a float type's width: for its bits, and for an integer that
+    selects among its values (a narrower or wider one keeps the selects out of the loop's
+    vector lanes)."""
+    return {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}[jnp.dtype(dtype).itemsize]
+
+
 def max_abs_bits(*xs):
     """The largest `|x|` over per-element float arrays, as the signed integer of its bits:
     for floats `>= 0` the integers' order is the floats' order, with NaN above infinity, so
@@ -112,7 +119,7 @@ def max_abs_bits(*xs):
     `|x|` is taken as a float, then reinterpreted: LLVM does not vectorise a loop that reads
     a component both as a float and, reinterpreted, as an integer (six times slower, measured
     in `quaternion_to_matrix`). For scale factors: no derivative flows through it."""
-    ity = {4: jnp.int32, 8: jnp.int64}[jnp.dtype(xs[0].dtype).itemsize]
+    ity = int_type(xs[0].dtype)
     bits = (jax.lax.bitcast_convert_type(jnp.abs(jax.lax.stop_gradient(x)), ity) for x in xs)
     return pairwise(jnp.maximum, bits)
 
@@ -120,14 +127,12 @@ def max_abs_bits(*xs):
 def signbit(x):
     """`jnp.signbit(x)` of a float array (true for -0.0 and a negative NaN), from the sign of
     its bits read as a signed integer: one comparison, without `jnp.signbit`'s nested `jit`."""
-    ity = {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}[jnp.dtype(x.dtype).itemsize]
-    return jax.lax.bitcast_convert_type(x, ity) < 0
+    return jax.lax.bitcast_convert_type(x, int_type(x.dtype)) < 0
 
 
 def float_bits(value, dtype):
     """The bits of the float `value` (not negative) in `dtype`, as a Python integer."""
-    ity = {4: np.int32, 8: np.int64}[np.dtype(dtype).itemsize]
-    return int(np.asarray(value, dtype).view(ity))
+    return int(np.asarray(value, dtype).view(np.dtype(int_type(dtype))))
 
 
 def exponent_scale_of_bits(bits, dtype):
@@ -210,7 +215,7 @@ def select(cond, a, b, dtype):
     """`jnp.where(cond, a, b)` for Python numbers `a` and `b`, as an array of `dtype`.
     On two Python numbers `jnp.where` makes an array of the default type, float64 with x64 on,
     which a float32 program would then compute and convert in every loop that reads it."""
-    return where(cond, jnp.asarray(a, dtype), jnp.asarray(b, dtype))
+    return where(cond, np.asarray(a, dtype), np.asarray(b, dtype))
 
 
 def pairwise(op, xs):
@@ -346,12 +351,8 @@ def per_slot(parts):
 
 @jax.custom_jvp
 def _select_stack(parts):
-    k = len(parts)
-    col = jax.lax.broadcasted_iota(jnp.int32, (*parts[0].shape, k), parts[0].ndim)
-    out = jnp.broadcast_to(parts[-1][..., None], col.shape)
-    for i in range(k - 2, -1, -1):
-        out = where(col == i, parts[i][..., None], out)
-    return out
+    shape, dims = (*parts[0].shape, len(parts)), tuple(range(parts[0].ndim))
+    return per_slot([jax.lax.broadcast_in_dim(p, shape, dims) for p in parts])
 
 
 @_select_stack.defjvp

@@ -519,8 +519,8 @@ def test_program_calls_no_nested_function(name):
 @pytest.mark.parametrize("name", list(CASES))
 def test_float32_conversion_has_no_64_bit_integer(name):
     """An integer that selects among float32 values is 32 bits wide, so that its selects share
-    the loop's vector lanes: atan2's octant index, a weakly typed int64, made
-    quaternion_to_euler's float32 loop 1.3 times slower."""
+    the loop's vector lanes (atan2's octant index, a weakly typed int64, slowed
+    quaternion_to_euler's float32 loop)."""
     f, shapes, *_ = CASES[name]
     g, g_shapes, _ = _pullback(f, shapes, jnp.float32)
     for what, h, s in (("forward", f, shapes), ("vjp", g, g_shapes)):
