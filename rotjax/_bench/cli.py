@@ -76,6 +76,10 @@ def _report(argv) -> int:
     args = p.parse_args(argv)
     readme = args.readme if not args.suffix else None  # the README shows the main run only
     stale = report.generate(args.json, args.out, readme, args.suffix, check=args.check)
+    from . import sweep
+
+    sweep_json = Path(args.json).with_name(f"bench-sweep{args.suffix}.json")
+    stale += sweep.generate(sweep_json, args.out, args.suffix, check=args.check)
     if not args.suffix:  # the pipelines' and compile times' tables, from their own files
         from . import compile_time, pipelines
 
@@ -146,12 +150,17 @@ def main(argv: list[str] | None = None) -> int:
         from . import compile_time
 
         return compile_time.main(argv[1:])
+    if argv and argv[0] == "sweep":
+        from . import sweep
+
+        return sweep.main(argv[1:])
     p = argparse.ArgumentParser(
         prog="python -m rotjax bench",
         description=RUN_HELP,
         epilog="python -m rotjax bench report --help: regenerate the docs from a JSON file. "
         "python -m rotjax bench pipelines --help: the pipelines' benchmark. "
-        "python -m rotjax bench compile --help: trace, lowering and compile times.",
+        "python -m rotjax bench compile --help: trace, lowering and compile times. "
+        "python -m rotjax bench sweep --help: throughput against a copy kernel, batch by batch.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--quick", action="store_true", help="small batch and subsets (CI)")
