@@ -6,8 +6,9 @@ at batches from ``2^16`` to ``2^26`` rotations, each next to a copy kernel that 
 writes the same bytes (``timing.copy_kernel``), in interleaved rounds. At small batches an
 accelerator is bound by launches and a CPU by its caches; the largest batch says what fraction
 of the memory bandwidth a program reaches. The inputs are generated once (``2^20`` at most)
-and tiled on the device. It writes a JSON file that ``python -m rotjax bench report --json
-FILE --suffix SUFFIX`` turns into ``_generated/sweep{SUFFIX}.md``.
+and tiled on the device. It writes a JSON file (``--json``); ``python -m rotjax bench report``
+turns a ``bench-sweep{SUFFIX}.json`` beside its own ``--json`` file (``--suffix SUFFIX``) into
+``_generated/sweep{SUFFIX}.md``.
 """
 
 from __future__ import annotations
