@@ -56,3 +56,20 @@ def test_small_sweep_measures_against_the_copy_kernel(tmp_path):
     S.generate(path, tmp_path, "-x")
     assert S.generate(path, tmp_path, "-x", check=True) == []
     assert S.generate(tmp_path / "missing.json", tmp_path) == []
+
+
+def test_a_program_that_fails_at_one_batch_ends_no_run():
+    """The gyro-log integration reshapes its batch into 1024 steps: at 2^6 it cannot run. It is
+    logged and left out; the program after it is measured."""
+    logged = []
+    rows = S.measure(
+        (6,),
+        ("float32",),
+        1,
+        ["integrate_angular_velocity_samples", "quaternion_to_matrix"],
+        log=logged.append,
+    )
+    assert {r["name"] for r in rows} == {"quaternion_to_matrix"} and len(rows) == 2
+    assert (
+        sum("integrate_angular_velocity_samples" in m and "not measured" in m for m in logged) == 3
+    )

@@ -52,11 +52,37 @@ def programs(found, ops=None):
 
 
 def _tiled(x, n):
-    """The first ``n`` rotations of ``x`` (a batch-first array) repeated along the batch."""
+    """``x`` (a batch-first array) repeated along the batch to ``n`` rotations."""
     import jax.numpy as jnp
 
     reps = -(-n // x.shape[0])
     return jnp.tile(x, (reps,) + (1,) * (x.ndim - 1))[:n] if reps > 1 else x[:n]
+
+
+def _timed(fn, args, rounds, copies):
+    """Throughput (Mrot/s) of ``jit(fn)`` on ``args`` and its ratio to a copy kernel of the
+    same bytes (``copies``: compiled copy kernels, shared by programs that read and write
+    alike), medians over interleaved rounds."""
+    import jax
+
+    n = jax.tree.leaves(args)[0].shape[0]
+    n_in = sum(int(np.prod(a.shape[1:])) for a in jax.tree.leaves(args))
+    out = jax.eval_shape(fn, *args)
+    n_out = sum(int(np.prod(o.shape[1:])) for o in jax.tree.leaves(out))
+    f = jax.jit(fn).lower(*args).compile()
+    shapes = jax.tree.map(lambda a: (a.shape, a.dtype), args)
+    key = (n_in, n_out, str(jax.tree.structure(args)), str(shapes))
+    if key not in copies:
+        copy = timing.copy_kernel(n_in, n_out)
+        copies[key] = jax.jit(lambda *a: copy(a)).lower(*args).compile()
+    entries = {"program": (lambda a: f(*a), args), "copy": (lambda a: copies[key](*a), args)}
+    for g, a in entries.values():  # warm up (first-call allocations)
+        timing.timed(g, a)
+    times = timing.throughput_group(entries, rounds)
+    return (
+        n / timing.median_time(times["program"]) / 1e6,
+        timing.median_ratio(times["copy"], times["program"]),
+    )
 
 
 def measure(
@@ -83,7 +109,7 @@ def measure(
     base = 1 << min(max(log2_batches), _BASE_LOG2)
     rng = np.random.default_rng(2024)
     q = quats(rng, base)
-    host = {kind: make(np.random.default_rng(2025), q) for kind, make in INPUTS.items()}
+    host = {}  # each kind of conversion input, made when a program first needs it
     pipeline_data = pipeline_inputs(rng, base)
     rows, copies, t0 = [], {}, time.perf_counter()
     for group, name, label, kind, fn in progs:
@@ -98,27 +124,18 @@ def measure(
                     return _tiled(jnp.asarray(x, dt), n)
 
                 if group == "pipeline":
-                    data = {k: device(pipeline_data[k]) for k in kind}
-                    args = contender_args(label, kind, data)
+                    args = contender_args(label, kind, {k: device(pipeline_data[k]) for k in kind})
                 else:
+                    if kind not in host:
+                        host[kind] = INPUTS[kind](np.random.default_rng(2025), q)
                     args = (jax.tree.map(device, host[kind]),)
-                n_in = sum(int(np.prod(a.shape[1:])) for a in jax.tree.leaves(args))
-                out = jax.eval_shape(fn, *args)
-                n_out = sum(int(np.prod(o.shape[1:])) for o in jax.tree.leaves(out))
-                f = jax.jit(fn).lower(*args).compile()
-                shapes = jax.tree.map(lambda a: (a.shape, a.dtype), args)
-                key = (n_in, n_out, str(jax.tree.structure(args)), str(shapes))
-                if key not in copies:  # programs that read and write alike share one
-                    copy = timing.copy_kernel(n_in, n_out)
-                    copies[key] = jax.jit(lambda *a, copy=copy: copy(a)).lower(*args).compile()
-                c = copies[key]
-                entries = {
-                    "program": (lambda a, f=f: f(*a), args),
-                    "copy": (lambda a, c=c: c(*a), args),
-                }
-                for g, a in entries.values():  # warm up (first-call allocations)
-                    timing.timed(g, a)
-                times = timing.throughput_group(entries, rounds)
+                try:
+                    mrot_s, vs_copy = _timed(fn, args, rounds, copies)
+                except Exception as e:  # noqa: BLE001 - one program's failure ends no run
+                    log(f"[sweep] {name} {label} {dt} 2^{log2}: not measured ({e!r:.200})")
+                    continue
+                finally:
+                    del args
                 rows.append(
                     {
                         "group": group,
@@ -126,11 +143,10 @@ def measure(
                         "contender": label,
                         "dtype": dt,
                         "log2_batch": log2,
-                        "mrot_s": n / timing.median_time(times["program"]) / 1e6,
-                        "vs_copy": timing.median_ratio(times["copy"], times["program"]),
+                        "mrot_s": mrot_s,
+                        "vs_copy": vs_copy,
                     }
                 )
-                del args, entries, f, c
             log(f"[sweep {time.perf_counter() - t0:6.1f}s] {name} {label} {dt}")
             if save is not None:
                 save(rows)
