@@ -24,6 +24,11 @@ class Contender(NamedTuple):
     fn: Callable  # input batch -> output batch
     traceable: bool  # jitted and differentiated (False: called on NumPy arrays)
 
+    @property
+    def label(self) -> str:
+        """``impl`` and ``method``, as the compile-time and sweep tables name a contender."""
+        return self.impl + (f" {self.method}" if self.method else "")
+
 
 # Every operation in the first two; a case with ``low_precision`` in the other two as well.
 DTYPES = ("float32", "float64", "bfloat16", "float16")

@@ -26,10 +26,6 @@ DEFAULT_JSON = "docs/bench-compile.json"
 BATCH = 1024
 
 
-def _label(contender) -> str:
-    return contender.impl + (f" {contender.method}" if contender.method else "")
-
-
 def targets(found) -> list[tuple[str, str, str]]:
     """``(group, name, contender)`` of every traceable program: the benchmark's conversions
     (``cases.CASES``) and the pipelines (``pipelines.pipelines``)."""
@@ -38,7 +34,7 @@ def targets(found) -> list[tuple[str, str, str]]:
 
     out = []
     for op, case in CASES.items():
-        out += [("conversion", op, _label(c)) for c in case.contenders(found) if c.traceable]
+        out += [("conversion", op, c.label) for c in case.contenders(found) if c.traceable]
     for name, (_, contenders) in pipelines(found).items():
         out += [("pipeline", name, c) for c in contenders]
     return out
@@ -59,7 +55,7 @@ def _program(found, group, name, contender, dtype):
     from .cases import CASES, INPUTS
 
     case = CASES[name]
-    (c,) = [c for c in case.contenders(found) if _label(c) == contender]
+    (c,) = [c for c in case.contenders(found) if c.label == contender]
     q = rng.normal(size=(BATCH, 4))
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     x = jax.tree.map(lambda v: jnp.asarray(v, dtype), INPUTS[case.input](rng, q))

@@ -39,8 +39,7 @@ def programs(found, ops=None):
     for op, case in CASES.items():
         for c in case.contenders(found):
             if c.impl == "rotjax" and c.traceable:
-                label = "rotjax" + (f" {c.method}" if c.method else "")
-                out.append(("conversion", op, label, case.input, c.fn))
+                out.append(("conversion", op, c.label, case.input, c.fn))
     for name, (keys, contenders) in pipelines(found).items():
         for label, fn in contenders.items():
             if label.startswith("rotjax"):
@@ -70,8 +69,7 @@ def _timed(fn, args, rounds, copies):
     out = jax.eval_shape(fn, *args)
     n_out = sum(int(np.prod(o.shape[1:])) for o in jax.tree.leaves(out))
     f = jax.jit(fn).lower(*args).compile()
-    shapes = jax.tree.map(lambda a: (a.shape, a.dtype), args)
-    key = (n_in, n_out, str(jax.tree.structure(args)), str(shapes))
+    key = (n_out, str(jax.tree.map(lambda a: (a.shape, a.dtype), args)))  # n_in is in the shapes
     if key not in copies:
         copy = timing.copy_kernel(n_in, n_out)
         copies[key] = jax.jit(lambda *a: copy(a)).lower(*args).compile()
