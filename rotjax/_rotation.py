@@ -227,7 +227,10 @@ class BatchedPytree:
         return cls._raw(*children)
 
     def __getstate__(self):
-        return tuple(np.asarray(x) for x in self._leaves())
+        # The leaves as they are (a JAX array pickles itself): a pickler that swaps arrays for
+        # placeholders, as pickle-based flatteners of jitted arguments do, must see them, and
+        # a traced one must not be converted.
+        return tuple(self._leaves())
 
     def __setstate__(self, state):
         for name, x in zip(self._LEAVES, state, strict=True):
@@ -292,7 +295,8 @@ class BatchedPytree:
 
     def __repr__(self) -> str:
         head = f"{type(self).__name__}.from_matrix("
-        m = repr(np.asarray(self.as_matrix())).splitlines()
+        m = self.as_matrix()  # under a trace, the tracer's repr (no values to show)
+        m = repr(m if isinstance(m, jax.core.Tracer) else np.asarray(m)).splitlines()
         m[1:] = [" " * len(head) + line for line in m[1:]]
         return head + "\n".join(m) + ")"
 

@@ -194,6 +194,60 @@ def test_jit_vmap_scan_grad_pickle():
     np.testing.assert_array_equal(back.as_quat(), r.as_quat())
 
 
+class _SwapArrays(pickle.Pickler):
+    """Pickles with every JAX array (a tracer too) swapped for a placeholder, as pickle-based
+    flatteners of jitted arguments do (array-api-extra's ``jax_autojit``, which scipy's JAX
+    tests wrap methods with)."""
+
+    def __init__(self, file, found):
+        super().__init__(file)
+        self.found = found
+
+    def persistent_id(self, obj):
+        if isinstance(obj, (jax.Array, jax.core.Tracer)):
+            self.found.append(obj)
+            return len(self.found) - 1
+        return None
+
+
+class _RestoreArrays(pickle.Unpickler):
+    def __init__(self, file, found):
+        super().__init__(file)
+        self.found = found
+
+    def persistent_load(self, pid):
+        return self.found[pid]
+
+
+@pytest.mark.parametrize("cls", ["Rotation", "RigidTransform"])
+def test_repr_and_pickling_of_a_traced_object(cls):
+    """Under jit, repr (and print) of a Rotation or RigidTransform shows the tracer, as scipy's
+    does, and pickling hands its leaves over as they are: a traced object goes through a
+    pickler that swaps arrays for placeholders and comes back with the same tracers."""
+    import io
+
+    make = {
+        "Rotation": Rotation.from_quat,
+        "RigidTransform": lambda q: rotjax.RigidTransform.from_rotation(Rotation.from_quat(q)),
+    }[cls]
+    q = jnp.asarray([0.1, -0.2, 0.3, 0.9])
+    texts = []
+
+    def through_pickle(q):
+        obj = make(q)
+        texts.append(repr(obj))
+        found, buf = [], io.BytesIO()
+        _SwapArrays(buf, found).dump(obj)
+        assert found and all(isinstance(x, jax.core.Tracer) for x in found)
+        buf.seek(0)
+        return _RestoreArrays(buf, found).load().as_matrix()
+
+    out = jax.jit(through_pickle)(q)
+    np.testing.assert_allclose(out, make(q).as_matrix(), atol=1e-15)
+    assert texts[0].startswith(f"{cls}.from_matrix(") and "Tracer" in texts[0], texts[0]
+    assert "Tracer" not in repr(make(q))  # outside a trace: the values
+
+
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
 def test_dtype_preserved(dtype):
     r = Rotation.from_quat(Q.astype(dtype))  # NumPy input keeps its float dtype too
