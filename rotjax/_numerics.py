@@ -241,22 +241,24 @@ def sum_squares(xs):
 # through a stacked array read back by slices: it writes it out, or recomputes it per slice).
 # unstack(stack(parts)) == parts exactly, so values and derivatives are those of the code.
 # A stacked unit quaternion (a conversion's, a normalisation's) is marked so: its readers skip
-# the prescaling, which is exactly 1 for it (see rotjax._quaternion._prescaled_parts).
+# the prescaling, which is exactly 1 for it (see rotjax._quaternion._prescaled_parts). A
+# quaternion whose maker has a direct form of its matrix carries it (see noted_matrix_form).
 class _Record(NamedTuple):
     ref: weakref.ref  # the traced array (its id may be reused once it is gone)
     parts: tuple
     matrix: bool  # by stack_matrix
     unit: bool  # a unit quaternion (see noted_unit)
+    matrix_form: object = None  # a function of no argument: this quaternion's rotation matrix
 
 
 _PARTS: dict[int, _Record] = {}
 
 
-def _note(out, parts, matrix=False, unit=False) -> None:
+def _note(out, parts, matrix=False, unit=False, matrix_form=None) -> None:
     if isinstance(out, jax.core.Tracer):
         key = id(out)
         ref = weakref.ref(out, lambda _, key=key: _PARTS.pop(key, None))
-        _PARTS[key] = _Record(ref, tuple(parts), matrix, unit)
+        _PARTS[key] = _Record(ref, tuple(parts), matrix, unit, matrix_form)
 
 
 def _record(x, matrix):
@@ -285,6 +287,14 @@ def noted_unit(x) -> bool:
     return hit is not None and hit.unit
 
 
+def noted_matrix_form(q):
+    """The function of no argument that ``stack(parts, matrix_form=...)`` noted for the
+    quaternion ``q`` in this trace (its rotation matrix, computed from what made ``q``), or
+    None."""
+    hit = _record(q, False)
+    return None if hit is None else hit.matrix_form
+
+
 def unstack(x):
     """The components of ``x`` along its last axis, as per-rotation arrays: the one way rotjax
     reads a stacked array. For an array that :func:`stack` returned in the same trace, the parts
@@ -307,10 +317,10 @@ def _read_jvp(primals, tangents):
     return _read(x), tuple(_components(dx))
 
 
-def stack(parts, unit=False):
+def stack(parts, unit=False, matrix_form=None):
     """``(..., k)`` from ``k`` per-rotation arrays: the one way rotjax writes a stacked array
     (see :func:`unstack`). ``unit``: the parts are those of a unit quaternion (to rounding) or
-    NaN, noted for :func:`noted_unit`.
+    NaN, noted for :func:`noted_unit`; ``matrix_form``: noted for :func:`noted_matrix_form`.
 
     Written as a select on the last axis among the broadcast parts: each output element
     computes every part, so XLA:CPU's loop computes the shared per-rotation factors once and is
@@ -322,7 +332,7 @@ def stack(parts, unit=False):
     fusible forms of ``_elementary``."""
     shape = jnp.broadcast_shapes(*(jnp.shape(p) for p in parts))
     out = _select_stack(tuple(jnp.broadcast_to(p, shape) for p in parts))
-    _note(out, parts, unit=unit)
+    _note(out, parts, unit=unit, matrix_form=matrix_form)
     return out
 
 
@@ -383,6 +393,14 @@ def stack_matrix(rows, concat=False):
     else:
         flat = stack(entries)
         out = flat.reshape(*flat.shape[:-1], len(rows), len(rows[0]))
+    _note(out, entries, matrix=True)
+    return out
+
+
+def noted_matrix(out, entries):
+    """``out``, a ``(..., m, n)`` matrix computed otherwise (per slot), noted as the stack of
+    ``entries`` (its per-rotation entries, row by row): a reader in this trace
+    (:func:`unstack_matrix`) takes those, as from :func:`stack_matrix`."""
     _note(out, entries, matrix=True)
     return out
 

@@ -22,6 +22,7 @@ from ._numerics import (
     check_shape,
     exponent_scale,
     from_scalar_last,
+    noted_matrix_form,
     noted_unit,
     public,
     recorded,
@@ -147,7 +148,12 @@ def quat_renormalize(q):
 
 def quat_to_matrix(q, bounded=False):
     """Rotation matrix of a scalar-last quaternion of any finite non-zero norm (NaN for zero
-    or a non-finite component). ``bounded``: see :func:`_prescaled_parts`."""
+    or a non-finite component). ``bounded``: see :func:`_prescaled_parts`. A quaternion made
+    in this trace by a maker with a direct form of its matrix (the exponential map's) gets that
+    form (:func:`rotjax._numerics.noted_matrix_form`)."""
+    direct = noted_matrix_form(q)
+    if direct is not None:
+        return direct()
     return quat_to_matrix_parts(*_prescaled_parts(q, bounded)[0], computed=recorded(q))
 
 
@@ -174,7 +180,7 @@ def _matrix_entries(x, y, z, w, fused):
     whose terms cancel is exactly zero (``z = w``: ``w^2 - z^2``), not ``1 - 2 z^2 / |q|^2``
     rounded; an entry equal to ``+-|q|^2`` is exactly ``+-1`` where ``|q|^2`` times its rounded
     reciprocal rounds to 1, as for every power-of-two norm (the prescaled unit quaternions)."""
-    return _homogeneous_matrix(x, y, z, w, reciprocal if fused else lambda n2: 1 / n2)
+    return homogeneous_matrix(x, y, z, w, reciprocal if fused else lambda n2: 1 / n2)
 
 
 @_matrix_entries.defjvp
@@ -183,12 +189,12 @@ def _matrix_entries_jvp(fused, primals, tangents):
     # multiplications only, which XLA:CPU fuses into one loop in reverse mode as well (a
     # division there split the gradient into six loops).
     def form(*q):
-        return _homogeneous_matrix(*q, reciprocal if fused else lambda n2: jnp.square(rsqrt(n2)))
+        return homogeneous_matrix(*q, reciprocal if fused else lambda n2: jnp.square(rsqrt(n2)))
 
     return _matrix_entries(*primals, fused), jax.jvp(form, primals, tangents)[1]
 
 
-def _homogeneous_matrix(x, y, z, w, reciprocal):
+def homogeneous_matrix(x, y, z, w, reciprocal):
     xx, yy, zz, ww = x * x, y * y, z * z, w * w
     r = reciprocal((xx + yy) + (zz + ww))
     t = 2 * r

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+import math
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -17,15 +20,25 @@ from ._numerics import (
     eps,
     exponent_scale,
     from_scalar_last,
+    noted_matrix,
+    per_slot,
     public,
     safe_norm,
     select,
+    spread,
     stack,
     to_scalar_last,
     unstack,
+    unstack_matrix,
     where,
 )
-from ._quaternion import quat_angle, quat_prescaled, quat_to_matrix, scaled_vector_part
+from ._quaternion import (
+    homogeneous_matrix,
+    quat_angle,
+    quat_prescaled,
+    quat_to_matrix_parts,
+    scaled_vector_part,
+)
 
 
 def _small(x2):
@@ -33,25 +46,86 @@ def _small(x2):
     return x2 < eps(x2.dtype) ** 0.5
 
 
-def exp_coeffs(theta2):
+def exp_coeffs(theta2, roots=False):
     """`sin(t/2)/t` and `cos(t/2)` for `t = sqrt(theta2)`, smooth at 0 (double where).
 
     Multiplications, additions and selects only (`rsqrt`, `sin_cos`), so that a conversion
-    built on them is one fused loop."""
+    built on them is one fused loop. `roots`: XLA's square root and division instead, for code
+    computed per output slot (see `_exp_matrix_slots`)."""
     small = _small(theta2)
     safe = where(small, 1.0, theta2)  # any non-zero value keeps the gradient finite
-    inv_t = rsqrt(safe)
-    t = safe * inv_t
-    t = t + (0.5 * inv_t) * (safe - t * t)  # one Newton step for sqrt: t to about 0.5 ulp
-    sin_h, cos_h = sin_cos(0.5 * t)
-    k = where(small, 0.5 - theta2 / 48 + theta2 * theta2 / 3840, sin_h * inv_t)
+    if roots:
+        t = jnp.sqrt(safe)
+        sin_h, cos_h = sin_cos(0.5 * t)
+        k_big = sin_h / t
+    else:
+        inv_t = rsqrt(safe)
+        t = safe * inv_t
+        t = t + (0.5 * inv_t) * (safe - t * t)  # one Newton step for sqrt: t to about 0.5 ulp
+        sin_h, cos_h = sin_cos(0.5 * t)
+        k_big = sin_h * inv_t
+    k = where(small, 0.5 - theta2 / 48 + theta2 * theta2 / 3840, k_big)
     c = where(small, 1 - theta2 / 8 + theta2 * theta2 / 384, cos_h)
     return k, c
 
 
 def rotvec_to_quat(v):
-    """`(k v, c)` with `k, c = exp_coeffs(|v|^2)`: the exponential map, scalar last."""
-    return stack(_rotvec_to_quat_parts(tuple(unstack(v))), unit=True)
+    """`(k v, c)` with `k, c = exp_coeffs(|v|^2)`: the exponential map, scalar last. Its
+    readers in this trace that want its matrix get `rotvec_matrix(v)`."""
+    parts = _rotvec_to_quat_parts(tuple(unstack(v)))
+    return stack(parts, unit=True, matrix_form=functools.partial(rotvec_matrix, v))
+
+
+def _exp_matrix_parts(v):
+    """The matrix of `exp(v)` from per-rotation arrays: that of `rotvec_to_quat`'s quaternion
+    (`quat_to_matrix` of it), stacked by a select (`stack_matrix`)."""
+    return quat_to_matrix_parts(*_rotvec_to_quat_parts(tuple(unstack(v))), computed=True)
+
+
+def _exp_matrix_slots(v):
+    """`_exp_matrix_parts` computed per output slot: each of the nine entries of the
+    `(..., 3, 3)` result from the whole rotation vector (`spread`), with XLA's square root and
+    divisions. XLA:CPU fuses this into one loop nest per rotation (a root or a division read by
+    the nine slots of a stacked result would be a loop of its own, which reads the input again)
+    and LLVM computes the shared terms once per rotation, where the multiplication-only forms
+    of `_elementary` are longer chains; the nest itself is scalar, as for any `(..., 3, 3)`
+    result. Within a few eps of `_exp_matrix_parts` (the tests check both against mpmath)."""
+    x, y, z = (spread(c, 9) for c in unstack(v))
+    k, c = exp_coeffs(x * x + y * y + z * z, roots=True)
+    out = per_slot(homogeneous_matrix(k * x, k * y, k * z, c, lambda n2: 1 / n2))
+    return out.reshape(*out.shape[:-1], 3, 3)
+
+
+# XLA:CPU runs a program that it estimates at fewer than 1000 flops on the calling thread, any
+# other on a worker thread (a context switch: 5 to 20 us more for one call). It counts the
+# per-slot form's shared terms nine times (about 1100 flops a rotation, against about 250 for
+# the per-rotation form), so up to this many rotations keep the per-rotation form.
+_FEW = 4
+
+
+@jax.custom_jvp
+def _exp_matrix(v):
+    """The matrix of `exp(v)`: on the CPU `_exp_matrix_slots` (but for `_FEW` rotations or
+    fewer), elsewhere `_exp_matrix_parts`. Differentiated as `_exp_matrix_parts` (the same
+    function): JAX's derivative of the per-slot code computes a `(3, 3)` cotangent per
+    intermediate and sums it over the slots, tens of times slower under `jit(grad)`."""
+    if math.prod(v.shape[:-1]) <= _FEW:
+        return _exp_matrix_parts(v)
+    return jax.lax.platform_dependent(v, cpu=_exp_matrix_slots, default=_exp_matrix_parts)
+
+
+@_exp_matrix.defjvp
+def _exp_matrix_jvp(primals, tangents):
+    (v,), (dv,) = primals, tangents
+    return _exp_matrix(v), jax.jvp(_exp_matrix_parts, (v,), (dv,))[1]
+
+
+def rotvec_matrix(v):
+    """`(..., 3, 3)` matrix of `exp(v)` for the stacked rotation vectors `v` (`_exp_matrix`),
+    noted with the per-rotation entries of `_exp_matrix_parts`: a reader in this trace takes
+    those, so a chain stays one loop, and XLA drops whichever form is not read."""
+    entries = unstack_matrix(_exp_matrix_parts(v))
+    return noted_matrix(_exp_matrix(v), entries)
 
 
 @jax.custom_jvp
@@ -210,7 +284,7 @@ def rotvec_to_matrix(rotvec: ArrayLike, degrees: bool = False) -> Array:
     check_shape(v, (3,), "rotvec")
     if degrees:
         v = jnp.deg2rad(v)
-    return cast(quat_to_matrix(rotvec_to_quat(v), bounded=True), dt)
+    return cast(rotvec_matrix(v), dt)
 
 
 @public
