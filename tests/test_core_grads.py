@@ -492,15 +492,13 @@ def test_euler_to_matrix_grads_at_lock(seq):
         _check_grads_euler("euler_to_quaternion", seq, a)
 
 
-def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
-    """rotvec_to_quaternion's custom jvp (and its transpose, and second derivatives) equals
-    JAX's own derivative of the forward code: the zero vector, the Taylor branch and its edge,
-    angles near and at pi, 2 pi and beyond, in both dtypes."""
-    from rotjax._rotvec import _rotvec_to_quat_parts, rotvec_to_quat
-
-    ref = undecorated(_rotvec_to_quat_parts)
-
-    rng = np.random.default_rng(29)
+def _exp_rule_matches_autodiff(rule, ref, seed, primal_ulps=0, batch=None):
+    """The custom jvp of ``rule`` (a function of rotation vectors) and its transpose equal
+    JAX's own derivatives of ``ref`` (its forward code): the zero vector, the Taylor branch and
+    its edge, angles near and at pi, 2 pi and beyond, in both dtypes; Hessians at three points
+    (``batch``: each repeated that many times, the first result taken). ``primal_ulps``: how far
+    the two primals may differ (0: equal)."""
+    rng = np.random.default_rng(seed)
     axes = rng.normal(size=(40, 3))
     axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
     angles = np.concatenate(
@@ -510,57 +508,46 @@ def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
     for dtype, tol in ((jnp.float64, 1e-14), (jnp.float32, 2e-6)):
         v = jnp.asarray(axes * angles[:, None], dtype)
         dv = jnp.asarray(rng.normal(size=v.shape), dtype)
-        out, jv = jit(lambda x, t: jax.jvp(rotvec_to_quat, (x,), (t,)))(v, dv)
+        out, jv = jit(lambda x, t: jax.jvp(rule, (x,), (t,)))(v, dv)
         out_ref, jv_ref = jit(lambda x, t: jax.jvp(ref, (x,), (t,)))(v, dv)
-        np.testing.assert_array_equal(out, out_ref)
+        if primal_ulps:
+            assert_close(out, out_ref, atol=primal_ulps * float(jnp.finfo(dtype).eps))
+        else:
+            np.testing.assert_array_equal(out, out_ref)
         assert jv.dtype == dtype
         assert_close(jv, jv_ref, atol=tol)
         ct = jnp.asarray(rng.normal(size=out.shape), dtype)
-        g = jit(jax.grad(lambda x: jnp.sum(ct * rotvec_to_quat(x))))(v)
+        g = jit(jax.grad(lambda x: jnp.sum(ct * rule(x))))(v)
         g_ref = jit(jax.grad(lambda x: jnp.sum(ct * ref(x))))(v)
         assert np.all(np.isfinite(np.asarray(g)))
         assert_close(g, g_ref, atol=tol * (1 + float(jnp.abs(g_ref).max())))
-    hess, hess_ref = (jit(jax.hessian(fn)) for fn in (rotvec_to_quat, ref))
+
+    def point(fn):
+        return fn if batch is None else lambda x: fn(jnp.broadcast_to(x, (batch, 3)))[0]
+
+    hess, hess_ref = (jit(jax.hessian(point(fn))) for fn in (rule, ref))
     for x in (jnp.zeros(3), jnp.asarray(axes[0] * 1e-5), jnp.asarray(axes[1] * 2.0)):
         h, h_ref = hess(x), hess_ref(x)
         assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
+
+
+def test_exp_map_hand_written_derivative_equals_autodiff_of_its_formula():
+    """rotvec_to_quaternion's custom jvp (and its transpose, and second derivatives) equals
+    JAX's own derivative of the forward code."""
+    from rotjax._rotvec import _rotvec_to_quat_parts, rotvec_to_quat
+
+    _exp_rule_matches_autodiff(rotvec_to_quat, undecorated(_rotvec_to_quat_parts), 29)
 
 
 def test_exp_matrix_rule_equals_autodiff_of_its_forward():
     """rotvec_to_matrix's custom jvp (the derivative of the matrix of rotvec_to_quaternion)
-    equals JAX's own derivative of its forward code (on the CPU the per-slot form, with XLA's
-    root and divisions), jvp and vjp, at the zero vector, in the Taylor branch and at its edge,
-    near and at pi and 2 pi and beyond, in both dtypes; second derivatives too."""
+    equals JAX's own derivative of its forward code: on the CPU the per-slot form, with XLA's
+    root and divisions (a batch of eight for the Hessians: a few rotations take the
+    per-rotation form). The primals are the same code compiled beside different tangent code:
+    equal to an ulp."""
     from rotjax._rotvec import _exp_matrix
 
-    rng = np.random.default_rng(31)
-    axes = rng.normal(size=(40, 3))
-    axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
-    angles = np.concatenate(
-        [[0.0, 1e-12, 1e-6, 3e-4, 1e-2, np.pi, 2 * np.pi, 7.5, 40.0], rng.uniform(0, 12, 31)]
-    )
-    jit = jax.jit
-    for dtype, tol in ((jnp.float64, 1e-14), (jnp.float32, 2e-6)):
-        v = jnp.asarray(axes * angles[:, None], dtype)
-        dv = jnp.asarray(rng.normal(size=v.shape), dtype)
-        out, jv = jit(lambda x, t: jax.jvp(_exp_matrix, (x,), (t,)))(v, dv)
-        out_ref, jv_ref = jit(lambda x, t: jax.jvp(_exp_matrix.fun, (x,), (t,)))(v, dv)
-        # the same code, compiled beside different tangent code: equal to an ulp
-        assert_close(out, out_ref, atol=2 * float(jnp.finfo(dtype).eps))
-        assert jv.dtype == dtype
-        assert_close(jv, jv_ref, atol=tol)
-        ct = jnp.asarray(rng.normal(size=out.shape), dtype)
-        g = jit(jax.grad(lambda x: jnp.sum(ct * _exp_matrix(x))))(v)
-        g_ref = jit(jax.grad(lambda x: jnp.sum(ct * _exp_matrix.fun(x))))(v)
-        assert np.all(np.isfinite(np.asarray(g)))
-        assert_close(g, g_ref, atol=tol * (1 + float(jnp.abs(g_ref).max())))
-    def first(fn):  # the matrix of the first of 8 copies of x: a batch in the per-slot form
-        return lambda x: fn(jnp.broadcast_to(x, (8, 3)))[0]
-
-    hess, hess_ref = (jit(jax.hessian(first(fn))) for fn in (_exp_matrix, _exp_matrix.fun))
-    for x in (jnp.zeros(3), jnp.asarray(axes[0] * 1e-5), jnp.asarray(axes[1] * 2.0)):
-        h, h_ref = hess(x), hess_ref(x)
-        assert_close(h, h_ref, atol=1e-13 * (1 + float(jnp.abs(h_ref).max())))
+    _exp_rule_matches_autodiff(_exp_matrix, _exp_matrix.fun, 31, primal_ulps=2, batch=8)
 
 
 @functools.partial(jax.jit, static_argnums=0)
