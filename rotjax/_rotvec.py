@@ -89,7 +89,8 @@ def _exp_matrix_slots(v):
     the nine slots of a stacked result would be a loop of its own, which reads the input again)
     and LLVM computes the shared terms once per rotation, where the multiplication-only forms
     of `_elementary` are longer chains; the nest itself is scalar, as for any `(..., 3, 3)`
-    result. Within a few eps of `_exp_matrix_parts` (the tests check both against mpmath)."""
+    result. Within a few eps of `_exp_matrix_parts`: the tests check both forms against scipy
+    in float64, at any angle (a batch takes this form, a single vector the other)."""
     x, y, z = (spread(c, 9) for c in unstack(v))
     k, c = exp_coeffs(x * x + y * y + z * z, roots=True)
     out = per_slot(homogeneous_matrix(k * x, k * y, k * z, c, lambda n2: 1 / n2))

@@ -240,11 +240,13 @@ def test_rotvec_tiny_and_huge_angles():
     for turns in [1e3, 1e6]:
         theta = 2 * np.pi * turns + 0.5  # huge angle = 0.5 rad modulo full turns
         v = np.array([0.0, 0.0, theta])
-        assert_close(
-            rj.rotvec_to_matrix(v),
-            Rotation.from_rotvec([0, 0, 0.5]).as_matrix(),
-            atol=1e-15 * theta,
-        )
+        want = Rotation.from_rotvec([0, 0, 0.5]).as_matrix()
+        assert_close(rj.rotvec_to_matrix(v), want, atol=1e-15 * theta)
+        # a batch (rotvec_to_matrix's per-slot form on the CPU), tiny vectors among them
+        batch = np.concatenate([np.tile(v, (6, 1)), np.tile(tiny, (2, 1))])
+        R = np.asarray(rj.rotvec_to_matrix(batch))
+        assert_close(R[:6], np.broadcast_to(want, (6, 3, 3)), atol=1e-15 * theta)
+        assert_close(R[6:], np.broadcast_to(np.eye(3), (2, 3, 3)), atol=1e-15)
         assert_close(
             rj.quaternion_to_rotvec(rj.rotvec_to_quaternion(v)), [0, 0, 0.5], atol=1e-15 * theta
         )
