@@ -86,14 +86,18 @@ def _elementary(axis: int, angle):
 
 
 def _euler_to_quat(a, seq):
+    """The product of the three elementary quaternions; its readers in this trace that want its
+    matrix get `_euler_to_matrix(a, seq)`, the product of the axis matrices (the same rotation,
+    without the quaternion's products repeated in each entry)."""
     axes, intrinsic = parse_seq(seq)
     q0, q1, q2 = (_elementary(ax, angle) for ax, angle in zip(axes, unstack(a), strict=True))
     # intrinsic: R = R_0 R_1 R_2 (rotating axes); extrinsic: R = R_2 R_1 R_0 (fixed axes)
-    return (
+    q = (
         quat_multiply(quat_multiply(q0, q1), q2)
         if intrinsic
         else quat_multiply(quat_multiply(q2, q1), q0)
     )
+    return stack(unstack(q), unit=True, matrix_form=functools.partial(_euler_to_matrix, a, seq))
 
 
 def _axis_matrix(axis: int, angle):

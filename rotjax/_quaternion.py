@@ -149,8 +149,8 @@ def quat_renormalize(q):
 def quat_to_matrix(q, bounded=False):
     """Rotation matrix of a scalar-last quaternion of any finite non-zero norm (NaN for zero
     or a non-finite component). ``bounded``: see :func:`_prescaled_parts`. A quaternion made
-    in this trace by a maker with a direct form of its matrix (the exponential map's) gets that
-    form (:func:`rotjax._numerics.noted_matrix_form`)."""
+    in this trace by a maker with a direct form of its matrix (the exponential map's, the Euler
+    angles') gets that form (:func:`rotjax._numerics.noted_matrix_form`)."""
     direct = noted_matrix_form(q)
     if direct is not None:
         return direct()
