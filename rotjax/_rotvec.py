@@ -98,7 +98,7 @@ def _exp_matrix_slots(v):
 
 
 # XLA:CPU runs a program that it estimates at fewer than 1000 flops on the calling thread, any
-# other on a worker thread (a context switch: 5 to 20 us more for one call). It counts the
+# other on a worker thread (a thread switch for each call). It counts the
 # per-slot form's shared terms nine times (about 1100 flops a rotation, against about 250 for
 # the per-rotation form), so up to this many rotations keep the per-rotation form.
 _FEW = 4
@@ -109,7 +109,7 @@ def _exp_matrix(v):
     """The matrix of `exp(v)`: on the CPU `_exp_matrix_slots` (but for `_FEW` rotations or
     fewer), elsewhere `_exp_matrix_parts`. Differentiated as `_exp_matrix_parts` (the same
     function): JAX's derivative of the per-slot code computes a `(3, 3)` cotangent per
-    intermediate and sums it over the slots, tens of times slower under `jit(grad)`."""
+    intermediate and sums it over the slots, far slower under `jit(grad)`."""
     if math.prod(v.shape[:-1]) <= _FEW:
         return _exp_matrix_parts(v)
     return jax.lax.platform_dependent(v, cpu=_exp_matrix_slots, default=_exp_matrix_parts)

@@ -166,7 +166,7 @@ def test_forward_program_is_one_pass(name, dtype):
 
 
 # XLA:CPU runs a program that it estimates at fewer than this many flops on the calling thread
-# and any other on a worker thread, which costs a context switch (5 to 20 us) per call.
+# and any other on a worker thread, which costs a thread switch per call.
 INLINE_FLOPS = 1000
 
 
