@@ -178,13 +178,14 @@ def _perpendicular(u):
     return [x * inv for x in p]
 
 
-def _polar(B, nan_at_zero=True):
+def _polar(B, nan_at_zero=True, summed=False):
     """Scalar-last unit quaternion (`w >= 0`, or `|w| <= 4 eps` and the largest component
     positive) of the rotation `Q` maximising `tr(Q^T B)` for `(..., 3, 3)` `B`, `Q`,
     and `(V, s)`: the right singular vectors `(..., 3, 3)`
     (columns) and the singular values `(..., 3)` of `B` scaled by `pow2_scale`, the
     last one negative where `det B < 0` (`Q^T B = V diag(s) V^T`). XLA drops the outputs a
     caller does not use. `B = 0` gives NaN, or with `nan_at_zero=False` some rotation.
+    `summed`: `B` is a sum over a set (see `_top`), whose derivative reads `q` back.
 
     One-sided Jacobi: the columns of `W = B V` are rotated in pairs until orthogonal, the
     rotations accumulated in `V`; both are rows of one `(..., 6, 3)` state, so each rotation
@@ -227,7 +228,15 @@ def _polar(B, nan_at_zero=True):
     flip = (c[3] < 0) & (c[3] * c[3] > (4 * eps(B.dtype)) ** 2 * n)
     inv = rsqrt(n)
     k = where(flip, -inv, inv)
-    q = jnp.moveaxis(jnp.stack(c, axis=0) * k[None], 0, -1)  # one transposing loop, as before
+    # Stacked by a select (`stack`): one vectorised loop, whereas a stack on a leading axis
+    # and its transpose is a concatenate, whose four branches LLVM compiles separately, each
+    # with its own copy of the extraction. The derivative of a sum over a set reads q's
+    # components back in the loops of its tangent: XLA would compute them again in each of
+    # those loops from the select, and reads them from memory after the transpose.
+    if summed:
+        q = jnp.moveaxis(jnp.stack(c, axis=0) * k[None], 0, -1)
+    else:
+        q = stack([x * k for x in c])
     s = jnp.stack([dot3(ua, wa), dot3(ub, wb), dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)
 
@@ -305,11 +314,11 @@ def _top_parts(b, q, aux):
     return tuple(q)
 
 
-def _run(B, nan_at_zero=True):
+def _run(B, nan_at_zero=True, summed=False):
     """The kernel's `(q, Q, (V, s))` for `B` (`_polar`, by chunks), as constants: the
     derivative rules take `(V, s)` from this same run, so that a derivative needs no second
     one; where nothing is differentiated they are unused, and XLA drops them."""
-    polar = functools.partial(_polar, nan_at_zero=nan_at_zero)
+    polar = functools.partial(_polar, nan_at_zero=nan_at_zero, summed=summed)
     # Stopped at the input: a caller's jvp then traces the kernel once, without tangents.
     return _by_chunks(polar, jax.lax.stop_gradient(B))
 
@@ -317,7 +326,7 @@ def _run(B, nan_at_zero=True):
 def _nearest(B, nan_at_zero=True, summed=False):
     """The kernel's top eigenvector of `davenport_k(B)`, differentiable (`_top_tangent`);
     `summed`: `B` is a sum over a set (see `_top`), else read from memory (`_top_parts`)."""
-    q, _, aux = _run(B, nan_at_zero)
+    q, _, aux = _run(B, nan_at_zero, summed)
     if summed:
         return _top(B, q, aux)
     return stack(_top_parts(tuple(unstack_matrix(B)), tuple(unstack(q)), aux), unit=True)
