@@ -234,6 +234,19 @@ def test_projection_gradient_adds_little(name, dtype):
     _assert_gradient_adds_at_most(name, f, shapes, dtype, PROJECTING_LOOPS, PROJECTING_BYTES)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+@pytest.mark.parametrize("name", list(PROJECTING))
+def test_projection_writes_its_result_in_place(name, dtype):
+    """The kernel's quaternion is written in its layout by the loop that computes it: no
+    transpose and no copy. Stacked on a leading axis and transposed, it was a concatenate, whose
+    four branches LLVM compiled separately, each with its own copy of the extraction."""
+    f, shapes = PROJECTING[name]
+    text = _compiled(f, shapes, dtype).as_text()
+    for op in ("transpose", "copy"):
+        assert f" {op}(" not in text, f"{name} {np.dtype(dtype).name}: a {op}"
+
+
 # The fitting problems: the eigenvector of a sum over a set. The rule writes its intermediate
 # tangent once (rotjax._numerics.shared_tangent); left as expressions, its cotangent was computed
 # again in the loop of each entry of the summed matrix. Loops added and bytes against the forward.
