@@ -83,6 +83,7 @@ _check_grads = check_grads
 _EULER_OUT = {
     "matrix_to_euler": (3,),
     "quaternion_to_euler": (3,),
+    "quaternion_to_euler_of_parts": (3,),
     "euler_to_matrix": (3, 3),
     "euler_to_quaternion": (4,),
 }
@@ -97,7 +98,19 @@ def _derivatives(f, x, dx, ct):
 
 @functools.partial(jax.jit, static_argnums=(0, 1))
 def _euler_derivatives(name, seq, x, dx, ct):
-    return _derivatives(lambda v: getattr(rj, name)(v, seq), x, dx, ct)
+    fn = _OF_PARTS.get(name) or getattr(rj, name)
+    return _derivatives(lambda v: fn(v, seq), x, dx, ct)
+
+
+def _quaternion_to_euler_of_parts(q, seq):
+    """quaternion_to_euler of the parts of an earlier operation (`stack` notes them), which its
+    derivative rule takes as they are, rather than of slices of an array."""
+    from rotjax._numerics import stack, unstack
+
+    return rj.quaternion_to_euler(stack(unstack(q)), seq)
+
+
+_OF_PARTS = {"quaternion_to_euler_of_parts": _quaternion_to_euler_of_parts}
 
 
 def _euler(name, seq, x, dx=None, ct=None):
@@ -676,13 +689,16 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     forward code's selects define the gradient rule), 180 degrees; second derivatives too."""
     from rotjax._euler import _quat_to_euler_stacked, quat_to_euler
 
-    ref = undecorated(_quat_to_euler_stacked, seq)
+    ref = undecorated(_quat_to_euler_stacked, seq, True)  # the flag selects the rule's form
 
     q = _euler_test_quaternions(seq)
     rng = np.random.default_rng(5)
     dq = rng.normal(size=q.shape) * np.linalg.norm(q, axis=-1, keepdims=True)
     ct = rng.normal(size=(len(q), 3))
     rule = _euler("quaternion_to_euler", seq, q, dq, ct)
+    _assert_rule_equals_autodiff(rule, ref, q, dq, ct)
+    # the rule's form for the parts of an earlier operation (matrix_to_euler's, a chain's)
+    rule = _euler("quaternion_to_euler_of_parts", seq, q, dq, ct)
     _assert_rule_equals_autodiff(rule, ref, q, dq, ct)
     # second derivatives at a generic point and at exact lock: the rule's forward over reverse
     # (as jax.hessian), the reference's forward over forward (as jacfwd of jacfwd), each one
