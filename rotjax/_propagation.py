@@ -16,7 +16,9 @@ from ._numerics import (
     from_scalar_last,
     like_rank,
     public,
+    stack,
     to_scalar_last,
+    unstack,
 )
 from ._quaternion import quat_multiply, quat_normalize, quat_prescaled, quat_renormalize
 from ._rates import check_frame, quat_rate
@@ -103,19 +105,31 @@ def integrate_angular_velocity(
     if method == "exponential":
         dq = rotvec_to_quat(w * h)
         q_next = quat_multiply(q, dq) if frame == "body" else quat_multiply(dq, q)
-    elif method == "euler":
-        q_next = q + h * quat_rate(q, w, frame)
     else:
+        # Euler's step and classical Runge-Kutta on the components (per-rotation arrays): each
+        # stage reads the parts of the one before, not slices of a stacked sum, which XLA
+        # copied one by one in loops of their own.
+        hs, qs = h[..., 0], unstack(q)
 
-        def f(x):
-            return quat_rate(x, w, frame)
+        def f(parts):
+            return unstack(quat_rate(stack(parts), w, frame))
 
-        k1 = f(q)
-        k2 = f(q + h / 2 * k1)
-        k3 = f(q + h / 2 * k2)
-        k4 = f(q + h * k3)
-        q_next = q + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return from_scalar_last(quat_renormalize(q_next), scalar_first).astype(out_dt)
+        def stage(k, c):
+            return [x + (c * hs) * y for x, y in zip(qs, k, strict=True)]
+
+        k1 = f(qs)
+        if method == "euler":
+            return _renormalized(stack(stage(k1, 1.0)), scalar_first, out_dt)
+        k2 = f(stage(k1, 0.5))
+        k3 = f(stage(k2, 0.5))
+        k4 = f(stage(k3, 1.0))
+        ks = zip(qs, k1, k2, k3, k4, strict=True)
+        q_next = stack([x + hs / 6 * (a + 2 * b + 2 * c + d) for x, a, b, c, d in ks])
+    return _renormalized(q_next, scalar_first, out_dt)
+
+
+def _renormalized(q, scalar_first, dtype):
+    return from_scalar_last(quat_renormalize(q), scalar_first).astype(dtype)
 
 
 # --- attitude from sampled angular velocity ----------------------------------------------------

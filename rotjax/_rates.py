@@ -41,6 +41,7 @@ from ._numerics import (
     matvec,
     public,
     skew,
+    stack,
     to_scalar_last,
     unit_scale,
     unstack,
@@ -334,7 +335,8 @@ def quat_rate(q, omega, frame):
     # body: q' = q * (omega_b, 0) / 2;  world: q' = (omega_w, 0) * q / 2  (R(p q) = R(p) R(q)).
     # "q_v' = (q_s w - q_v x w) / 2" (Markley & Crassidis 2014) is the world-frame form.
     w = _pure(omega)
-    return 0.5 * (quat_multiply(q, w) if frame == "body" else quat_multiply(w, q))
+    product = quat_multiply(q, w) if frame == "body" else quat_multiply(w, q)
+    return stack([0.5 * x for x in unstack(product)])  # its parts, for a reader (see stack)
 
 
 @public

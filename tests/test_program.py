@@ -75,6 +75,18 @@ CASES = {
     "sixd_to_matrix": (
         rj.sixd_to_matrix, [(6,)], (1, BYTES_SLACK, 240), (1, BYTES_SLACK, 340)
     ),
+    "integrate_angular_velocity_euler": (
+        lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="euler"), [(4,), (3,)],
+        (1, BYTES_SLACK, 125), (1, BYTES_SLACK, 220)
+    ),
+    "integrate_angular_velocity_rk4": (
+        lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="rk4"), [(4,), (3,)],
+        (1, BYTES_SLACK, 270), (1, BYTES_SLACK, 540)
+    ),
+    "integrate_angular_velocity_exponential": (
+        lambda q, w: rj.integrate_angular_velocity(q, w, 0.01), [(4,), (3,)],
+        (1, BYTES_SLACK, 240), (1, BYTES_SLACK, 325)
+    ),
 }  # fmt: skip
 
 _FUSION = re.compile(r"^\s*(?:ROOT\s+)?\S+ = \S+ fusion\(", re.MULTILINE)
