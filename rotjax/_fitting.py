@@ -33,10 +33,10 @@ from ._numerics import (
     dot3,
     exponent_scale,
     from_scalar_last,
-    like_rank,
     matmul,
     public,
     safe_norm,
+    stack,
     stack_matrix,
     to_scalar_last,
     unstack,
@@ -504,5 +504,6 @@ def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike, scalar_first: bool = False) 
     p = quat_normalize(to_scalar_last(p, scalar_first))
     q = to_scalar_last(q, scalar_first)
     rel = quat_to_rotvec(quat_multiply(quat_conjugate(p), q))  # angle in [0, pi]: the shorter arc
-    out = quat_multiply(p, rotvec_to_quat(like_rank(t[..., None], rel) * rel))
+    # t times the parts of rel (read as they are: a stacked product would be read by slices)
+    out = quat_multiply(p, rotvec_to_quat(stack([t * x for x in unstack(rel)])))
     return cast(from_scalar_last(out, scalar_first), dt)

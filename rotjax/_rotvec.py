@@ -23,10 +23,10 @@ from ._numerics import (
     noted_matrix,
     per_slot,
     public,
-    safe_norm,
     select,
     spread,
     stack,
+    sum_squares,
     to_scalar_last,
     unstack,
     unstack_matrix,
@@ -351,9 +351,15 @@ def axis_angle_to_quaternion(
     if degrees:
         angle = jnp.deg2rad(angle)
     batch = jnp.broadcast_shapes(axis.shape[:-1], angle.shape)
-    n = jnp.broadcast_to(axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True)), (*batch, 3))
-    half = jnp.broadcast_to(angle, batch)[..., None] / 2
-    q = jnp.concatenate([jnp.sin(half) * n, jnp.cos(half)], axis=-1)
+    # The axis scaled by a power of two first, so that its norm can neither overflow nor
+    # underflow; a zero, infinite or NaN axis gives NaN. The half angle's sine and cosine as
+    # for the Euler and rotation-vector conversions (`sin_cos`): one loop.
+    a = [jnp.broadcast_to(x, batch) for x in unstack(axis)]
+    scale, _ = exponent_scale(*a, mark=True)
+    a = [x * scale for x in a]
+    sin_h, cos_h = sin_cos(0.5 * jnp.broadcast_to(angle, batch))
+    k = sin_h * rsqrt(sum_squares(a))  # the sum is in [1, 12) or NaN: rsqrt's domain
+    q = stack([x * k for x in a] + [where(jnp.isnan(scale), jnp.nan, cos_h)], unit=True)
     return cast(from_scalar_last(q, scalar_first), dt)
 
 
@@ -391,19 +397,21 @@ def quaternion_to_axis_angle(
     (q,), dt = as_float(q)
     check_shape(q, (4,), "q")
     q = quat_prescaled(to_scalar_last(q, scalar_first))
-    q = where(q[..., 3:] < 0, -q, q)
-    qv = q[..., :3]
-    # The vector part scaled on its own (a power of two), so that a tiny one (1e-160 next to
-    # w = 1) still gives its direction rather than underflowing to the identity's.
-    s, _ = exponent_scale(jax.lax.stop_gradient(jnp.max(jnp.abs(qv), axis=-1)))
-    qv = qv * s[..., None]
-    n = safe_norm(qv)
-    ident = (n == 0)[..., None]
-    e_x = jnp.asarray([1.0, 0.0, 0.0], dtype=q.dtype)
-    axis = where(ident, e_x, qv / where(ident, 1.0, n[..., None]))
+    x, y, z, w = unstack(q)
+    # The axis of the hemisphere w >= 0, from the vector part scaled on its own (a power of
+    # two), so that a tiny one (1e-160 next to w = 1) still gives its direction rather than
+    # underflowing to the identity's.
+    s, _ = exponent_scale(x, y, z)
+    s = where(w < 0, -s, s)
+    v = [c * s for c in (x, y, z)]
+    m2 = sum_squares(v)  # at least 1 (or eps^2 for a subnormal part) unless 0: rsqrt's domain
+    ident = m2 == 0
+    inv = rsqrt(where(ident, 1.0, m2))
     angle = quat_angle(q)
     # NaN (not a valid-looking identity) for the zero quaternion or a non-finite component.
-    axis = where(jnp.isnan(angle)[..., None], jnp.nan, axis)
+    nan = jnp.isnan(angle)
+    axis = [where(ident, e, c * inv) for c, e in zip(v, (1.0, 0.0, 0.0), strict=True)]
+    axis = stack([where(nan, jnp.nan, c) for c in axis])
     if degrees:
         angle = jnp.rad2deg(angle)
     return cast(axis, dt), cast(angle, dt)

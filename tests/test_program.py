@@ -75,6 +75,16 @@ CASES = {
     "sixd_to_matrix": (
         rj.sixd_to_matrix, [(6,)], (1, BYTES_SLACK, 240), (1, BYTES_SLACK, 340)
     ),
+    "axis_angle_to_quaternion": (
+        rj.axis_angle_to_quaternion, [(3,), ()], (1, BYTES_SLACK, 136), (1, BYTES_SLACK, 157)
+    ),
+    # Two outputs of different shapes: XLA:CPU writes each in a loop of its own, which reads q.
+    "quaternion_to_axis_angle": (
+        rj.quaternion_to_axis_angle, [(4,)], (2, 1.7, 315), (2, 1.6, 545)
+    ),
+    "slerp": (
+        rj.slerp, [(4,), (4,), ()], (1, BYTES_SLACK, 405), (1, BYTES_SLACK, 755)
+    ),
     "integrate_angular_velocity_euler": (
         lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="euler"), [(4,), (3,)],
         (1, BYTES_SLACK, 125), (1, BYTES_SLACK, 220)
@@ -174,7 +184,8 @@ def test_forward_program_is_one_pass(name, dtype):
     f, shapes, budget, _ = CASES[name]
     item = np.dtype(dtype).itemsize
     out = jax.eval_shape(f, *(jax.ShapeDtypeStruct((N, *s), dtype) for s in shapes))
-    io = (sum(int(np.prod(s)) for s in shapes) + out.size // N) * item
+    io = (sum(int(np.prod(s)) for s in shapes) + sum(o.size for o in jax.tree.leaves(out)) // N)
+    io *= item
     _check(f"{name} {np.dtype(dtype).name}", _program(f, shapes, dtype), budget, io)
 
 

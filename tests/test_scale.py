@@ -422,3 +422,16 @@ def test_unchecked_matrix_rotations_at_any_scale(dtype):
     for _ in range(6):
         chain, unit = chain * chain, unit * unit
     assert_close(chain.as_quat(canonical=True), unit.as_quat(canonical=True), atol=64 * eps)
+
+
+@pytest.mark.parametrize(("dtype", "scale"), CASES, ids=IDS)
+def test_axis_angle_to_quaternion_with_an_axis_of_any_norm(dtype, scale):
+    """The axis need not be unit: s axis gives the quaternion of the unit axis (|axis|^2
+    overflowed beyond 1e19 in float32 and gave the identity's vector part, and underflowed
+    below 1e-19 and gave inf); the zero axis gives NaN in its own element."""
+    axis, angle = V.astype(dtype), np.linspace(-3.0, 3.0, len(V)).astype(dtype)
+    want = np.asarray(rj.axis_angle_to_quaternion(axis, angle))
+    got = np.asarray(rj.axis_angle_to_quaternion(axis * dtype(scale), angle))
+    assert_close(got, want, atol=4 * np.finfo(dtype).eps)
+    zero = np.asarray(rj.axis_angle_to_quaternion(np.concatenate([axis[:1] * 0, axis]), 1.0))
+    assert np.all(np.isnan(zero[0])) and np.all(np.isfinite(zero[1:]))
