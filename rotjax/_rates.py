@@ -29,19 +29,20 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
+from ._elementary import sin_cos
 from ._euler import parse_seq
 from ._numerics import (
     as_float,
     axial,
     cast,
     check_shape,
-    cross,
+    cross3,
     from_scalar_last,
     matmul,
-    matvec,
     public,
     skew,
     stack,
+    stack_matrix,
     to_scalar_last,
     unit_scale,
     unstack,
@@ -81,15 +82,15 @@ def _reduce(seq: str, frame: str):
 
 
 def _rate_angles(a, negate: bool, reverse: bool):
-    if reverse:
-        a = a[..., ::-1]
-    return -a if negate else a
+    """The three angles of `a` (per-rotation arrays) in the intrinsic body-frame case."""
+    parts = unstack(a)[::-1] if reverse else unstack(a)
+    return [-x for x in parts] if negate else parts
 
 
 def _rotate_k_transposed(k: int, angle, v):
     """`R_k(angle)^T @ v` on a list of three component arrays (`R_k`: about axis `k`)."""
     p, r = (k + 1) % 3, (k + 2) % 3  # (k, p, r) is cyclic, R_k turns e_p towards e_r
-    c, s = jnp.cos(angle), jnp.sin(angle)
+    s, c = sin_cos(angle)
     out = list(v)
     out[p] = c * v[p] + s * v[r]
     out[r] = c * v[r] - s * v[p]
@@ -107,41 +108,50 @@ def _middle_terms(axes, a1):
     i, j, k = axes
     m = 3 - i - j
     s = _levi_civita(i, j, m)
-    c1, s1 = jnp.cos(a1), jnp.sin(a1)
+    s1, c1 = sin_cos(a1)
     if i == k:  # proper Euler: u . e_k = u . e_i = cos(a1)
         return s1, c1, m, s
     return c1, s * s1, m, s  # Tait-Bryan: m == k, u . e_k = s sin(a1)
 
 
-def _body_rate_matrix(axes, a):
-    """`E` with `omega_body = E @ rates` for the intrinsic sequence `axes` (closed form)."""
+def _body_rate_columns(axes, a):
+    """The columns of `E` (`omega_body = E @ rates`) for the intrinsic sequence `axes` and
+    its angles `a` (per-rotation arrays), each three per-rotation arrays (closed form)."""
     i, j, k = axes
     m = 3 - i - j
     s = _levi_civita(i, j, m)
-    _, a1, a2 = unstack(a)
+    _, a1, a2 = a
     zero = jnp.zeros_like(a1)
     one = jnp.ones_like(a1)
+    sin1, cos1 = sin_cos(a1)
     u = [zero, zero, zero]
-    u[i] = jnp.cos(a1)
-    u[m] = s * jnp.sin(a1)
+    u[i] = cos1
+    u[m] = s * sin1
     e_j = [zero, zero, zero]
     e_j[j] = one
     e_k = [zero, zero, zero]
     e_k[k] = one
-    cols = (_rotate_k_transposed(k, a2, u), _rotate_k_transposed(k, a2, e_j), e_k)
-    return jnp.stack([cols[c][r] for r in range(3) for c in range(3)], axis=-1).reshape(
-        *a.shape[:-1], 3, 3
-    )
+    return [_rotate_k_transposed(k, a2, u), _rotate_k_transposed(k, a2, e_j), e_k]
 
 
-def _rate_matrix(a, seq, frame):
+# The rate matrix and the functions of it work on its columns and on components (per-rotation
+# arrays): a stacked matrix or vector read back by slices is copied slice by slice by XLA.
+
+
+def _rate_columns(a, seq, frame):
+    """The columns of `E` (in the angle order of `seq`), each three per-rotation arrays."""
     axes, negate, reverse = _reduce(seq, frame)
-    E = _body_rate_matrix(axes, _rate_angles(a, negate, reverse))
-    return E[..., ::-1] if reverse else E
+    cols = _body_rate_columns(axes, _rate_angles(a, negate, reverse))
+    return cols[::-1] if reverse else cols
+
+
+def _apply_columns(cols, x):
+    """`E @ x` from the columns of `E` and the components of `x`."""
+    return [sum(c[i] * xc for c, xc in zip(cols, x, strict=True)) for i in range(3)]
 
 
 def _inverse_rates(a, omega, seq, frame, damping):
-    """Exact (`damping == 0`) or damped least-squares inverse of `_rate_matrix`.
+    """Exact (`damping == 0`) or damped least-squares inverse of the rate matrix (`_rate_columns`).
 
     With `E = R_k(a2)^T M P` (`P` a permutation) and `v = R_k(a2) omega`, the damped solution
     `(E^T E + d^2 I)^-1 E^T omega = P^T (G + d^2 I)^-1 M^T v` only needs the 2x2 block
@@ -150,9 +160,8 @@ def _inverse_rates(a, omega, seq, frame, damping):
     at least `2 d^2` everywhere.
     """
     axes, negate, reverse = _reduce(seq, frame)
-    a = _rate_angles(a, negate, reverse)
     i, j, k = axes
-    _, a1, a2 = unstack(a)
+    _, a1, a2 = _rate_angles(a, negate, reverse)
     h, g, m, s = _middle_terms(axes, a1)
     v = _rotate_k_transposed(k, -a2, unstack(omega))  # R_k(a2) omega
     # M [x0, x1, x2] = v:  Tait-Bryan  v_i = h x0,        v_k = g x0 + x2;
@@ -171,8 +180,7 @@ def _inverse_rates(a, omega, seq, frame, damping):
     x0 = where(damped, x0_damped, x0_exact)
     x1 = v[j] / (1 + d2)
     x2 = where(damped, x2_damped, x2_exact)
-    out = jnp.stack([x0, x1, x2], axis=-1)
-    return out[..., ::-1] if reverse else out
+    return stack([x2, x1, x0] if reverse else [x0, x1, x2])
 
 
 @public
@@ -209,7 +217,8 @@ def euler_rate_matrix(angles: ArrayLike, seq: str, frame: str = "body") -> Array
     """
     (a,), dt = as_float(angles)
     check_shape(a, (3,), "angles")
-    return cast(_rate_matrix(a, seq, frame), dt)
+    cols = _rate_columns(a, seq, frame)
+    return cast(stack_matrix([[c[r] for c in cols] for r in range(3)]), dt)
 
 
 @public
@@ -241,8 +250,7 @@ def euler_rates_to_angular_velocity(
     (a, r), dt = as_float(angles, rates)
     check_shape(a, (3,), "angles")
     check_shape(r, (3,), "rates")
-    E = _rate_matrix(a, seq, frame)
-    return cast(matvec(E, r), dt)
+    return cast(stack(_apply_columns(_rate_columns(a, seq, frame), unstack(r))), dt)
 
 
 @public
@@ -490,8 +498,9 @@ def angular_velocity_to_matrix_derivative(
 # --- Euler-angle accelerations -----------------------------------------------------------------
 
 
-def _rate_derivative_terms(E, rates, seq):
-    """`(dE/dt) @ rates` from the columns `c_n` of `E` (either frame).
+def _rate_derivative_terms(c, r, seq):
+    """`(dE/dt) @ rates` from the columns `c_n` of `E` (either frame) and the rates `r`, as
+    components (per-rotation arrays).
 
     Write `R` as the product of its three elementary rotations, outermost first (angle order
     for an intrinsic `seq`, reversed for an extrinsic one). A column belonging to an inner
@@ -504,14 +513,9 @@ def _rate_derivative_terms(E, rates, seq):
     (extrinsic, where the outer factor of each pair is the later angle).
     """
     _, intrinsic = parse_seq(seq)
-    c = [E[..., :, n] for n in range(3)]
-    r = [rates[..., n : n + 1] for n in range(3)]
-    acc = (
-        r[0] * r[1] * cross(c[0], c[1])
-        + r[0] * r[2] * cross(c[0], c[2])
-        + r[1] * r[2] * cross(c[1], c[2])
-    )
-    return acc if intrinsic else -acc
+    sign = 1.0 if intrinsic else -1.0
+    pairs = [(r[m] * r[n], cross3(c[m], c[n])) for m, n in ((0, 1), (0, 2), (1, 2))]
+    return [sign * sum(w * x[i] for w, x in pairs) for i in range(3)]
 
 
 @public
@@ -553,8 +557,10 @@ def euler_accelerations_to_angular_acceleration(
     check_shape(a, (3,), "angles")
     check_shape(r, (3,), "rates")
     check_shape(acc, (3,), "accelerations")
-    E = _rate_matrix(a, seq, frame)
-    return cast((matvec(E, acc) + _rate_derivative_terms(E, r, seq)), dt)
+    cols, rates = _rate_columns(a, seq, frame), unstack(r)
+    terms = _rate_derivative_terms(cols, rates, seq)
+    out = [x + y for x, y in zip(_apply_columns(cols, unstack(acc)), terms, strict=True)]
+    return cast(stack(out), dt)
 
 
 @public
@@ -605,5 +611,6 @@ def angular_acceleration_to_euler_accelerations(
     check_shape(r, (3,), "rates")
     check_shape(al, (3,), "alpha")
     d = jnp.asarray(damping).astype(a.dtype)
-    E = _rate_matrix(a, seq, frame)
-    return cast(_inverse_rates(a, al - _rate_derivative_terms(E, r, seq), seq, frame, d), dt)
+    terms = _rate_derivative_terms(_rate_columns(a, seq, frame), unstack(r), seq)
+    rhs = stack([x - y for x, y in zip(unstack(al), terms, strict=True)])
+    return cast(_inverse_rates(a, rhs, seq, frame, d), dt)

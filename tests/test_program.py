@@ -85,6 +85,27 @@ CASES = {
     "slerp": (
         rj.slerp, [(4,), (4,), ()], (1, BYTES_SLACK, 405), (1, BYTES_SLACK, 755)
     ),
+    "euler_rate_matrix": (
+        lambda a: rj.euler_rate_matrix(a, SEQ), [(3,)], (1, BYTES_SLACK, 215), (1, BYTES_SLACK, 350)
+    ),
+    "euler_rates_to_angular_velocity": (
+        lambda a, r: rj.euler_rates_to_angular_velocity(a, r, SEQ), [(3,), (3,)],
+        (1, BYTES_SLACK, 155), (1, BYTES_SLACK, 355)
+    ),
+    "euler_accelerations_to_angular_acceleration": (
+        lambda a, r, c: rj.euler_accelerations_to_angular_acceleration(a, r, c, SEQ),
+        [(3,), (3,), (3,)], (1, BYTES_SLACK, 200), (1, BYTES_SLACK, 435)
+    ),
+    # The exact inverse divides by the distance to gimbal lock; the quotient, read by two
+    # components, is a division, which XLA computes in a loop of its own (reading the input).
+    "angular_velocity_to_euler_rates": (
+        lambda a, w: rj.angular_velocity_to_euler_rates(a, w, SEQ), [(3,), (3,)],
+        (2, 1.7, 255), (4, 2.1, 560)
+    ),
+    "angular_acceleration_to_euler_accelerations": (
+        lambda a, r, c: rj.angular_acceleration_to_euler_accelerations(a, r, c, SEQ),
+        [(3,), (3,), (3,)], (2, 1.8, 480), (4, 2.1, 1085)
+    ),
     "integrate_angular_velocity_euler": (
         lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="euler"), [(4,), (3,)],
         (1, BYTES_SLACK, 125), (1, BYTES_SLACK, 220)
@@ -321,6 +342,8 @@ NOT_FULL_WIDTH = {
     ("matrix_to_euler", "gradient", "float64"): 1,
     ("euler_to_matrix", "forward", "float32"): 1,
     ("euler_to_matrix", "forward", "float64"): 1,
+    ("euler_rate_matrix", "forward", "float32"): 1,
+    ("euler_rate_matrix", "forward", "float64"): 1,
     ("rotvec_to_matrix", "forward", "float32"): 1,
     ("rotvec_to_matrix", "forward", "float64"): 1,
     ("sixd_to_matrix", "forward", "float32"): 1,
