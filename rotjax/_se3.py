@@ -12,6 +12,7 @@ up to pi.
 
 from __future__ import annotations
 
+import functools
 import math
 from fractions import Fraction
 
@@ -29,6 +30,7 @@ from ._numerics import (
     eps,
     matmul,
     public,
+    recorded,
     stack,
     stack_matrix,
     sum_squares,
@@ -108,9 +110,10 @@ def _b_coeff(x, k, c):
 
 
 def _combo(alpha, beta, gamma, p):
-    """``alpha I + beta hat(p) + gamma p p^T``, shape ``(..., 3, 3)``, elementwise (every SO(3)
-    Jacobian has this form, since ``hat(p)^2 = p p^T - |p|^2 I``)."""
-    x, y, z = unstack(p)
+    """``alpha I + beta hat(p) + gamma p p^T``, shape ``(..., 3, 3)``, elementwise, from the
+    components of ``p`` (every SO(3) Jacobian has this form, since
+    ``hat(p)^2 = p p^T - |p|^2 I``)."""
+    x, y, z = p
     rows = (
         (alpha + gamma * x * x, -beta * z + gamma * x * y, beta * y + gamma * x * z),
         (beta * z + gamma * y * x, alpha + gamma * y * y, -beta * x + gamma * y * z),
@@ -134,6 +137,13 @@ def _so3_coeffs(p):
     x = sum_squares(p)
     k, c = exp_coeffs(x)
     return x, k, c, 2 * k * k, _b_coeff(x, k, c)
+
+
+def _inverse_coeffs(beta, p):
+    """``(alpha, beta, gamma)`` of :func:`_combo` for the inverse SO(3) Jacobians of ``p``
+    (its components): ``beta = -1/2`` for the left one, ``1/2`` for the right one."""
+    g, e = _inv_coeffs(p)
+    return g, jnp.full_like(g, beta), e
 
 
 def _inv_coeffs(p):
@@ -171,9 +181,22 @@ def log_parts(q, t):
 
 
 def _left(p):
-    """SO(3) left Jacobian of ``p`` as ``(alpha, beta, gamma)`` of :func:`_combo`."""
-    x, k, c, a, b = _so3_coeffs(unstack(p))
+    """SO(3) left Jacobian of ``p`` (its components) as ``(alpha, beta, gamma)`` of
+    :func:`_combo`."""
+    x, k, c, a, b = _so3_coeffs(p)
     return 2 * k * c, a, b  # alpha = 1 - b t^2 = sin(t)/t
+
+
+def _so3_jacobian(p, coeffs):
+    """``_combo(*coeffs(parts), parts)`` for the components ``parts`` of ``p``. Components
+    read by slices (``p`` not made by ``stack`` in this trace) are taken in their own
+    ``(..., 1)`` shape: on per-rotation arrays XLA moves each slice's reshape past the
+    arithmetic that reads it, and with that many readers copies each slice in a loop of its
+    own."""
+    parts = unstack(p)
+    if not recorded(p):
+        parts = [x[..., None] for x in parts]
+    return _combo(*coeffs(parts), parts).reshape(*p.shape[:-1], 3, 3)
 
 
 def _blocks(tl, bl, br):
@@ -306,7 +329,7 @@ def so3_left_jacobian(rotvec: ArrayLike) -> Array:
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
-    return cast(_combo(*_left(p), p), dt)
+    return cast(_so3_jacobian(p, _left), dt)
 
 
 @public
@@ -337,8 +360,11 @@ def so3_right_jacobian(rotvec: ArrayLike) -> Array:
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
-    alpha, a, b = _left(p)
-    return cast(_combo(alpha, -a, b, p), dt)
+    def coeffs(parts):
+        alpha, a, b = _left(parts)
+        return alpha, -a, b
+
+    return cast(_so3_jacobian(p, coeffs), dt)
 
 
 @public
@@ -366,8 +392,7 @@ def so3_left_jacobian_inverse(rotvec: ArrayLike) -> Array:
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
-    g, e = _inv_coeffs(unstack(p))
-    return cast(_combo(g, jnp.full_like(g, -0.5), e, p), dt)
+    return cast(_so3_jacobian(p, functools.partial(_inverse_coeffs, -0.5)), dt)
 
 
 @public
@@ -394,8 +419,7 @@ def so3_right_jacobian_inverse(rotvec: ArrayLike) -> Array:
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
-    g, e = _inv_coeffs(unstack(p))
-    return cast(_combo(g, jnp.full_like(g, 0.5), e, p), dt)
+    return cast(_so3_jacobian(p, functools.partial(_inverse_coeffs, 0.5)), dt)
 
 
 def homogeneous(q, t, zero=None):
@@ -541,7 +565,7 @@ def se3_left_jacobian(xi: ArrayLike) -> Array:
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
     p, r = _split_xi(xi)
-    J = _combo(*_left(p), p)
+    J = _combo(*_left(unstack(p)), unstack(p))
     return cast(_blocks(J, _q_matrix(p, r), J), dt)
 
 
@@ -569,13 +593,12 @@ def se3_right_jacobian(xi: ArrayLike) -> Array:
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
     p, r = _split_xi(-xi)
-    J = _combo(*_left(p), p)
+    J = _combo(*_left(unstack(p)), unstack(p))
     return cast(_blocks(J, _q_matrix(p, r), J), dt)
 
 
 def _left_inverse(p, r):
-    g, e = _inv_coeffs(unstack(p))
-    Ji = _combo(g, jnp.full_like(g, -0.5), e, p)
+    Ji = _combo(*_inverse_coeffs(-0.5, unstack(p)), unstack(p))
     return _blocks(Ji, -matmul(matmul(Ji, _q_matrix(p, r)), Ji), Ji)
 
 

@@ -106,6 +106,12 @@ CASES = {
         lambda a, r, c: rj.angular_acceleration_to_euler_accelerations(a, r, c, SEQ),
         [(3,), (3,), (3,)], (2, 1.8, 480), (4, 2.1, 1085)
     ),
+    "so3_right_jacobian": (
+        rj.so3_right_jacobian, [(3,)], (1, BYTES_SLACK, 295), (1, BYTES_SLACK, 495)
+    ),
+    "so3_left_jacobian_inverse": (
+        rj.so3_left_jacobian_inverse, [(3,)], (1, BYTES_SLACK, 330), (1, BYTES_SLACK, 530)
+    ),
     "integrate_angular_velocity_euler": (
         lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="euler"), [(4,), (3,)],
         (1, BYTES_SLACK, 125), (1, BYTES_SLACK, 220)
@@ -344,6 +350,10 @@ NOT_FULL_WIDTH = {
     ("euler_to_matrix", "forward", "float64"): 1,
     ("euler_rate_matrix", "forward", "float32"): 1,
     ("euler_rate_matrix", "forward", "float64"): 1,
+    ("so3_right_jacobian", "forward", "float32"): 1,
+    ("so3_right_jacobian", "forward", "float64"): 1,
+    ("so3_left_jacobian_inverse", "forward", "float32"): 1,
+    ("so3_left_jacobian_inverse", "forward", "float64"): 1,
     ("rotvec_to_matrix", "forward", "float32"): 1,
     ("rotvec_to_matrix", "forward", "float64"): 1,
     ("sixd_to_matrix", "forward", "float32"): 1,
