@@ -119,17 +119,14 @@ def integrate_angular_velocity(
 
         k1 = f(qs)
         if method == "euler":
-            return _renormalized(stack(stage(k1, 1.0)), scalar_first, out_dt)
-        k2 = f(stage(k1, 0.5))
-        k3 = f(stage(k2, 0.5))
-        k4 = f(stage(k3, 1.0))
-        ks = zip(qs, k1, k2, k3, k4, strict=True)
-        q_next = stack([x + hs / 6 * (a + 2 * b + 2 * c + d) for x, a, b, c, d in ks])
-    return _renormalized(q_next, scalar_first, out_dt)
-
-
-def _renormalized(q, scalar_first, dtype):
-    return from_scalar_last(quat_renormalize(q), scalar_first).astype(dtype)
+            q_next = stack(stage(k1, 1.0))
+        else:
+            k2 = f(stage(k1, 0.5))
+            k3 = f(stage(k2, 0.5))
+            k4 = f(stage(k3, 1.0))
+            ks = zip(qs, k1, k2, k3, k4, strict=True)
+            q_next = stack([x + hs / 6 * (a + 2 * b + 2 * c + d) for x, a, b, c, d in ks])
+    return from_scalar_last(quat_renormalize(q_next), scalar_first).astype(out_dt)
 
 
 # --- attitude from sampled angular velocity ----------------------------------------------------
