@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import exponent_scale, int_type, select, signbit, where
+from ._numerics import exponent_scale, int_type, select, signbit, sum_squares, where
 
 # Newton's iteration for 1/sqrt(x): the integer type that reinterprets the float's bits, the
 # magic constant of the initial guess (relative error at most 3.4%), and the number of steps
@@ -316,6 +316,41 @@ def _atan2_jvp(primals, tangents):
     zero = r2 == 0
     r = rsqrt(where(zero, 1.0, r2))
     return atan2(y, x), (xs * dy - ys * dx) * where(zero, 0.0, s * (r * r))
+
+
+def hypot(*xs):
+    """`sqrt(sum x^2)` of a vector given by its components (per-element arrays), at any scale:
+    scaled by a power of two first (exact), so that `(1e-160, 0)` gives `1e-160`, and the root
+    as `m2 rsqrt(m2)`, which fuses with its readers (a root or a sum over a stacked axis is a
+    loop of its own on XLA:CPU). Zero gives 0 with a zero gradient (the cone's minimum-norm
+    subgradient; double where); an infinite or NaN component gives NaN.
+
+    Derivative: `sum_i u_i dx_i`, `u` the unit vector of the scaled components (a rule, equal
+    to JAX's derivative of this code): JAX's multiplies by the scale and by its inverse in
+    turn, which underflows for the small components of a vector near the bottom of the normal
+    range (a gradient of 0 for a component of `1e-38` in float32)."""
+    return _hypot(tuple(xs))
+
+
+def _hypot_parts(xs):
+    s, inv = exponent_scale(*xs)
+    ys = [x * s for x in xs]
+    m2 = sum_squares(ys)  # at least eps^2 unless 0 or not finite: rsqrt's domain
+    zero = m2 == 0
+    r = rsqrt(where(zero, 1.0, m2))  # rsqrt(inf) is NaN
+    return ys, where(zero, 0.0, r), where(zero, 0.0, m2 * r) * inv
+
+
+@jax.custom_jvp
+def _hypot(xs):
+    return _hypot_parts(xs)[2]
+
+
+@_hypot.defjvp
+def _hypot_jvp(primals, tangents):
+    (xs,), (dxs,) = primals, tangents
+    ys, r, n = _hypot_parts(xs)
+    return n, sum((y * r) * dx for y, dx in zip(ys, dxs, strict=True))
 
 
 def scaled_pair(u, v):

@@ -10,7 +10,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._elementary import atan2, rsqrt, scaled_pair, sin_cos
+from ._elementary import atan2, hypot, rsqrt, scaled_pair, sin_cos
 from ._matrix import selected_column
 from ._numerics import (
     as_float,
@@ -155,22 +155,6 @@ def _lifted(u, v):
     return u * f, v * f
 
 
-def _hypot(u, v):
-    """`sqrt(u^2 + v^2)` at any scale (the pair is scaled by a power of two first: the
-    modulus of `(1e-160, 0)` is `1e-160`, not 0), with a finite (zero) gradient at the
-    origin (double where).
-
-    Written on the two scalars rather than as `safe_norm` of a stacked pair: XLA:CPU turns
-    that reduction into separate loops.
-    """
-    u, v, _, inv = scaled_pair(u, v)
-    sq = u * u + v * v  # in [1, 8) unless 0: rsqrt's domain
-    zero = sq == 0
-    # sq rsqrt(sq), not jnp.sqrt: XLA computes a root read by several slots of a stacked
-    # result in a loop of its own, which reads the input again; this form fuses.
-    return where(zero, 0.0, sq * rsqrt(where(zero, 1.0, sq))) * inv
-
-
 @functools.cache
 def _algorithm_axes(seq):
     """`(i, j, k, sign)` of Bernardes & Viollet's algorithm for `seq`: the axes of the
@@ -288,8 +272,8 @@ def _quat_to_euler_stacked(q, seq, sliced):
     # do not change): with only q scaled, the product of a small component of A and one of a
     # tiny C could underflow (b c = 1e-7 * 1e-303) and lose a turn that the others do not carry.
     sa, sb, sc, sd = _substitute((*_lifted(a, b), *_lifted(c, d)), locks)
-    num = {"first": sb * sc - sa * sd, "mid": _hypot(c, d), "third": sb * sc + sa * sd}
-    den = {"first": sa * sc + sb * sd, "mid": _hypot(a, b), "third": sa * sc - sb * sd}
+    num = {"first": sb * sc - sa * sd, "mid": hypot(c, d), "third": sb * sc + sa * sd}
+    den = {"first": sa * sc + sb * sd, "mid": hypot(a, b), "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
     num, den = per_slot([num[n] for n in order]), per_slot([den[n] for n in order])
     out = atan2(num, den) * _slots(num, factor) + _slots(num, shift)
@@ -316,7 +300,7 @@ def _euler_jacobian(comps, seq):
     Im(conj(C) dC) / |C|^2 (after the lock substitution); the middle one is
     2 atan2(|C|, |A|), with derivative 2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) and
     d|C| = C.dC / |C|, taken as 0 where C = 0 (at lock the middle angle sits at the edge of its
-    range, a kink: the minimum-norm subgradient, as _hypot's). Near lock one factor is tiny:
+    range, a kink: the minimum-norm subgradient, as hypot's). Near lock one factor is tiny:
     each is scaled by its own power of two before it is squared (`scaled_pair`), so the
     derivatives, about 1 / distance, stay right down to the lock threshold rather than
     dividing by an underflowed |C|^2.

@@ -21,11 +21,10 @@ from ._eigen import (
     pow2_scale,
     top_eigenvector,
 )
-from ._elementary import atan2, rsqrt
+from ._elementary import atan2, hypot, rsqrt
 from ._numerics import (
     FULL,
     as_float,
-    axial,
     broadcast_batch,
     cast,
     check_shape,
@@ -33,7 +32,6 @@ from ._numerics import (
     dot3,
     exponent_scale,
     from_scalar_last,
-    matmul,
     public,
     safe_norm,
     stack,
@@ -94,10 +92,6 @@ def _scaled_operands(x, y, fx, fy):
     return (_scaled(v, [f[..., None, None] for f in fs]) for v, fs in ((x, fx), (y, fy)))
 
 
-def _mT(x):
-    return jnp.swapaxes(x, -1, -2)
-
-
 # --- losses --------------------------------------------------------------------------------
 
 
@@ -144,9 +138,12 @@ def geodesic_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
         ```
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
-    M = matmul(_mT(R_a), R_b)
-    c = 0.5 * (jnp.trace(M, axis1=-2, axis2=-1) - 1)
-    s = safe_norm(axial(M))
+    a, b = unstack_matrix(R_a), unstack_matrix(R_b)
+    # The trace and the axial vector of M = R_a^T R_b from the entries (M_ij = sum_k a_ki b_kj):
+    # no matrix product or stacked axial vector, which XLA:CPU computes in loops of their own.
+    m = [[sum(a[3 * k + i] * b[3 * k + j] for k in range(3)) for j in range(3)] for i in range(3)]
+    c = 0.5 * (m[0][0] + m[1][1] + m[2][2] - 1)
+    s = hypot(*[0.5 * (m[2][1] - m[1][2]), 0.5 * (m[0][2] - m[2][0]), 0.5 * (m[1][0] - m[0][1])])
     # atan2 of an infinite sine is a finite pi/2: an infinite component gives NaN instead.
     return cast(where(jnp.isfinite(s) & jnp.isfinite(c), atan2(s, c), jnp.nan), dt)
 
@@ -178,6 +175,8 @@ def chordal_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
         ```
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
+    # On the stacked difference: its gradient is then elementwise over the (3, 3) entries,
+    # which XLA:CPU vectorises (written entry by entry, it is a scalar loop nest).
     D = R_a - R_b
     return cast(safe_norm(D.reshape(*D.shape[:-2], 9)), dt)
 

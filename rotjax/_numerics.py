@@ -405,6 +405,16 @@ def noted_matrix(out, entries):
     return out
 
 
+def unstack_many(x):
+    """:func:`unstack` for components that many expressions read (every entry of a Jacobian):
+    read by slices, they are kept in their own ``(..., 1)`` shape, and the caller drops that
+    axis from its result. On per-rotation slices XLA moves each slice's reshape past the
+    arithmetic that reads it, and with that many readers copies each slice in a loop of its
+    own."""
+    parts = unstack(x)
+    return parts if recorded(x) else [p[..., None] for p in parts]
+
+
 def unstack_matrix(R):
     """The entries of a ``(..., m, n)`` matrix, row by row, as per-rotation arrays (see
     :func:`unstack`)."""

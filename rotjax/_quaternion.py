@@ -15,7 +15,7 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._elementary import atan2, reciprocal, rsqrt
+from ._elementary import atan2, hypot, reciprocal, rsqrt
 from ._numerics import (
     as_float,
     cast,
@@ -214,12 +214,8 @@ def quat_angle(q, bounded=False):
     # |w|, n of order 1: atan2's derivative is finite
     (x, y, z, w), _ = _prescaled_parts(q, bounded)
     w = jnp.abs(w)
-    # |q_v| with q_v scaled on its own (a power of two), so that 1e-160 stays 1e-160 (atan2 is
-    # a ratio, scale-free); the root as m2 rsqrt(m2), 0 with a zero gradient at q_v = 0.
-    s, inv = exponent_scale(x, y, z)
-    m2 = sum_squares([x * s, y * s, z * s])
-    zero = m2 == 0
-    n = where(zero, 0.0, m2 * rsqrt(where(zero, 1.0, m2))) * inv
+    # |q_v| scaled on its own, so that 1e-160 stays 1e-160 (atan2 is a ratio, scale-free)
+    n = hypot(x, y, z)
     # NaN for the zero quaternion: atan2(0, 0) = 0 would pass for the identity; and for an
     # infinite component, where atan2 would return a finite angle.
     bad = ((n == 0) & (w == 0)) | ~jnp.isfinite(n + w)

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._elementary import sin_cos
+from ._elementary import reciprocal, sin_cos
 from ._euler import parse_seq
 from ._numerics import (
     as_float,
@@ -43,6 +43,7 @@ from ._numerics import (
     skew,
     stack,
     stack_matrix,
+    sum_squares,
     to_scalar_last,
     unit_scale,
     unstack,
@@ -419,12 +420,16 @@ def quaternion_derivative_to_angular_velocity(
     # omega is homogeneous of degree 0 in (q, q_dot): both scaled by the power of two that
     # brings q's largest component into [0.5, 2) (exact; 1 for a unit q), so that |q|^2 can
     # neither underflow nor overflow.
-    s = unit_scale(*(q[..., i] for i in range(4)))[..., None]
-    q, qd = q * s, qd * s
-    qc = quat_conjugate(q)
-    prod = quat_multiply(qc, qd) if frame == "body" else quat_multiply(qd, qc)
-    x, y, z, w = (q[..., i : i + 1] for i in range(4))
-    return cast((2 * prod[..., :3] / (x * x + y * y + z * z + w * w)), dt)
+    # On components, the reciprocal of |q|^2 (in [1/4, 16)) by multiplications: a division
+    # read by the three components, or a stacked intermediate read back, is a loop of its own.
+    # NaN for the zero quaternion or a non-finite component (through the scale's mark).
+    qp, qdp = unstack(q), unstack(qd)
+    s = unit_scale(*qp, mark=True)
+    qp, qdp = [x * s for x in qp], [x * s for x in qdp]
+    qc, qd = quat_conjugate(stack(qp)), stack(qdp)
+    prod = unstack(quat_multiply(qc, qd) if frame == "body" else quat_multiply(qd, qc))
+    r = 2 * reciprocal(sum_squares(qp))
+    return cast(stack([c * r for c in prod[:3]]), dt)
 
 
 @public

@@ -101,16 +101,16 @@ def _exp_matrix_slots(v):
 # other on a worker thread (a thread switch for each call). It counts the
 # per-slot form's shared terms nine times (about 1100 flops a rotation, against about 250 for
 # the per-rotation form), so up to this many rotations keep the per-rotation form.
-_FEW = 4
+FEW = 4
 
 
 @jax.custom_jvp
 def _exp_matrix(v):
-    """The matrix of `exp(v)`: on the CPU `_exp_matrix_slots` (but for `_FEW` rotations or
+    """The matrix of `exp(v)`: on the CPU `_exp_matrix_slots` (but for `FEW` rotations or
     fewer), elsewhere `_exp_matrix_parts`. Differentiated as `_exp_matrix_parts` (the same
     function): JAX's derivative of the per-slot code computes a `(3, 3)` cotangent per
     intermediate and sums it over the slots, far slower under `jit(grad)`."""
-    if math.prod(v.shape[:-1]) <= _FEW:
+    if math.prod(v.shape[:-1]) <= FEW:
         return _exp_matrix_parts(v)
     return jax.lax.platform_dependent(v, cpu=_exp_matrix_slots, default=_exp_matrix_parts)
 

@@ -28,18 +28,17 @@ from ._numerics import (
     cast,
     check_shape,
     eps,
-    matmul,
     public,
-    recorded,
     stack,
     stack_matrix,
     sum_squares,
     unstack,
+    unstack_many,
     unstack_matrix,
     where,
 )
 from ._quaternion import quat_to_matrix_parts, scaled_vector_parts
-from ._rotvec import exp_coeffs, rotvec_scale
+from ._rotvec import FEW, exp_coeffs, rotvec_scale
 
 # --- power series in x = t^2 ------------------------------------------------------------------
 
@@ -109,17 +108,21 @@ def _b_coeff(x, k, c):
 # --- building blocks ----------------------------------------------------------------------
 
 
-def _combo(alpha, beta, gamma, p):
-    """``alpha I + beta hat(p) + gamma p p^T``, shape ``(..., 3, 3)``, elementwise, from the
+def _combo_rows(alpha, beta, gamma, p):
+    """The rows (per-rotation entries) of ``alpha I + beta hat(p) + gamma p p^T`` from the
     components of ``p`` (every SO(3) Jacobian has this form, since
     ``hat(p)^2 = p p^T - |p|^2 I``)."""
     x, y, z = p
-    rows = (
+    return (
         (alpha + gamma * x * x, -beta * z + gamma * x * y, beta * y + gamma * x * z),
         (beta * z + gamma * y * x, alpha + gamma * y * y, -beta * x + gamma * y * z),
         (-beta * y + gamma * z * x, beta * x + gamma * z * y, alpha + gamma * z * z),
     )
-    return stack_matrix(rows)
+
+
+def _combo(alpha, beta, gamma, p):
+    """:func:`_combo_rows` as a ``(..., 3, 3)`` matrix."""
+    return stack_matrix(_combo_rows(alpha, beta, gamma, p))
 
 
 def _combo_apply(alpha, beta, gamma, p, u):
@@ -188,47 +191,81 @@ def _left(p):
 
 
 def _so3_jacobian(p, coeffs):
-    """``_combo(*coeffs(parts), parts)`` for the components ``parts`` of ``p``. Components
-    read by slices (``p`` not made by ``stack`` in this trace) are taken in their own
-    ``(..., 1)`` shape: on per-rotation arrays XLA moves each slice's reshape past the
-    arithmetic that reads it, and with that many readers copies each slice in a loop of its
-    own."""
-    parts = unstack(p)
-    if not recorded(p):
-        parts = [x[..., None] for x in parts]
+    """``_combo(*coeffs(parts), parts)`` for the components ``parts`` of ``p``, read by
+    :func:`rotjax._numerics.unstack_many` (each is read by every entry)."""
+    parts = unstack_many(p)
     return _combo(*coeffs(parts), parts).reshape(*p.shape[:-1], 3, 3)
 
 
-def _blocks(tl, bl, br):
-    """The 6x6 block lower-triangular matrix ``[[tl, 0], [bl, br]]``."""
-    top = jnp.concatenate([tl, jnp.zeros_like(tl)], axis=-1)
-    return jnp.concatenate([top, jnp.concatenate([bl, br], axis=-1)], axis=-2)
+def _blocks(tl, bl, br, shape):
+    """The ``(..., 6, 6)`` block lower-triangular matrix ``[[tl, 0], [bl, br]]`` of the rows
+    (per-rotation entries) of three 3x3 blocks, for a batch of shape ``shape``. Up to ``FEW``
+    rotations stacked row by row (``stack_matrix(concat=True)``), which XLA counts at fewer
+    flops (see ``FEW``); a larger batch by a select, which XLA:CPU vectorises."""
+    zero = jnp.zeros_like(tl[0][0])
+    rows = [(*row, zero, zero, zero) for row in tl]
+    rows += [(*u, *v) for u, v in zip(bl, br, strict=True)]
+    return stack_matrix(rows, concat=math.prod(shape) <= FEW).reshape(*shape, 6, 6)
 
 
-def _split_xi(xi):
-    parts = unstack(xi)
-    return stack(parts[:3]), stack(parts[3:])
+def _matmul_rows(A, B):
+    """The product of two 3x3 matrices given by their rows of per-rotation entries."""
+    return [
+        [A[i][0] * B[0][j] + A[i][1] * B[1][j] + A[i][2] * B[2][j] for j in range(3)]
+        for i in range(3)
+    ]
 
 
-def _q_matrix(p, r):
-    """The bottom-left block ``Q(p, r)`` of the SE(3) left Jacobian of ``xi = [p, r]``:
-    ``Q = 1/2 R + b (P R + R P + P R P) + d (P P R + R P P - 3 P R P)
-    + f (P R P P + P P R P)``, with ``P = hat(p)``, ``R = hat(r)``, ``b = (t - sin t)/t^3``,
-    ``d = (t^2 + 2 cos t - 2)/(2 t^4)`` and ``f = (2t - 3 sin t + t cos t)/(2 t^5)``."""
-    x, k, c, a, b = _so3_coeffs(unstack(p))
-    d = _series(x, _SERIES_D, lambda xb: (1 - 4 * k * k) / (2 * xb))
+def _hat_rows(v):
+    x, y, z = v
+    zero = jnp.zeros_like(x)
+    return ((zero, -z, y), (z, zero, -x), (-y, x, zero))
+
+
+def _q_rows(p, r):
+    """The rows of the bottom-left block ``Q(p, r)`` of the SE(3) left Jacobian of
+    ``xi = [p, r]`` (components): ``Q = 1/2 R + b (P R + R P + P R P) + d (P P R + R P P -
+    3 P R P) + f (P R P P + P P R P)``, with ``P = hat(p)``, ``R = hat(r)``,
+    ``b = (t - sin t)/t^3``, ``d = (t^2 + 2 cos t - 2)/(2 t^4)`` and
+    ``f = (2t - 3 sin t + t cos t)/(2 t^5)``."""
+    x, k, c, a, b = _so3_coeffs(p)
+    d = _series(x, _SERIES_D, lambda xb: (1 - 4 * k * k) * (0.5 * _recip(xb)))
     # 2 - 3 sin t / t + cos t, with sin t / t = 2 k c and cos t = c^2 - (k t)^2.
-    f = _series(x, _SERIES_F, lambda xb: (2 - 6 * k * c + c * c - k * k * xb) / (2 * xb * xb))
-    P, R = nm.skew(p), nm.skew(r)
-    PR, RP = matmul(P, R), matmul(R, P)
-    PRP = matmul(PR, P)
-    PPR, RPP = matmul(P, PR), matmul(RP, P)
-    PRPP, PPRP = matmul(PRP, P), matmul(P, PRP)
+    f = _series(
+        x, _SERIES_F, lambda xb: (2 - 6 * k * c + c * c - k * k * xb) * (0.5 * _recip(xb * xb))
+    )
+    P, R = _hat_rows(p), _hat_rows(r)
+    PR, RP = _matmul_rows(P, R), _matmul_rows(R, P)
+    PRP = _matmul_rows(PR, P)
+    PPR, RPP = _matmul_rows(P, PR), _matmul_rows(RP, P)
+    PRPP, PPRP = _matmul_rows(PRP, P), _matmul_rows(P, PRP)
+    return [
+        [
+            0.5 * R[i][j]
+            + b * (PR[i][j] + RP[i][j] + PRP[i][j])
+            + d * (PPR[i][j] + RPP[i][j] - 3 * PRP[i][j])
+            + f * (PRPP[i][j] + PPRP[i][j])
+            for j in range(3)
+        ]
+        for i in range(3)
+    ]
 
-    def s(v):
-        return v[..., None, None]
 
-    return 0.5 * R + s(b) * (PR + RP + PRP) + s(d) * (PPR + RPP - 3 * PRP) + s(f) * (PRPP + PPRP)
+def _se3_jacobian(xi, sign, inverse):
+    """The SE(3) left Jacobian of ``sign * xi`` (``sign = -1``: the right one), or its inverse,
+    on the components of ``xi`` read by :func:`rotjax._numerics.unstack_many` (each is read
+    by every entry of the ``(..., 6, 6)`` result)."""
+    parts = unstack_many(xi)
+    if sign < 0:
+        parts = [-x for x in parts]
+    p, r = parts[:3], parts[3:]
+    Q = _q_rows(p, r)
+    if inverse:
+        J = _combo_rows(*_inverse_coeffs(-0.5, p), p)
+        Q = [[-x for x in row] for row in _matmul_rows(_matmul_rows(J, Q), J)]
+    else:
+        J = _combo_rows(*_left(p), p)
+    return _blocks(J, Q, J, xi.shape[:-1])
 
 
 # --- public functions ---------------------------------------------------------------------
@@ -360,6 +397,7 @@ def so3_right_jacobian(rotvec: ArrayLike) -> Array:
     """
     (p,), dt = as_float(rotvec)
     check_shape(p, (3,), "rotvec")
+
     def coeffs(parts):
         alpha, a, b = _left(parts)
         return alpha, -a, b
@@ -529,8 +567,9 @@ def se3_adjoint(T: ArrayLike) -> Array:
     """
     (T,), dt = as_float(T)
     check_shape(T, (4, 4), "T")
-    R, t = T[..., :3, :3], T[..., :3, 3]
-    return cast(_blocks(R, matmul(nm.skew(t), R), R), dt)
+    e = unstack_matrix(T)
+    R, t = [e[4 * i : 4 * i + 3] for i in range(3)], [e[4 * i + 3] for i in range(3)]
+    return cast(_blocks(R, _matmul_rows(_hat_rows(t), R), R, T.shape[:-2]), dt)
 
 
 @public
@@ -564,9 +603,7 @@ def se3_left_jacobian(xi: ArrayLike) -> Array:
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
-    p, r = _split_xi(xi)
-    J = _combo(*_left(unstack(p)), unstack(p))
-    return cast(_blocks(J, _q_matrix(p, r), J), dt)
+    return cast(_se3_jacobian(xi, 1, False), dt)
 
 
 @public
@@ -592,14 +629,7 @@ def se3_right_jacobian(xi: ArrayLike) -> Array:
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
-    p, r = _split_xi(-xi)
-    J = _combo(*_left(unstack(p)), unstack(p))
-    return cast(_blocks(J, _q_matrix(p, r), J), dt)
-
-
-def _left_inverse(p, r):
-    Ji = _combo(*_inverse_coeffs(-0.5, unstack(p)), unstack(p))
-    return _blocks(Ji, -matmul(matmul(Ji, _q_matrix(p, r)), Ji), Ji)
+    return cast(_se3_jacobian(xi, -1, False), dt)
 
 
 @public
@@ -627,7 +657,7 @@ def se3_left_jacobian_inverse(xi: ArrayLike) -> Array:
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
-    return cast(_left_inverse(*_split_xi(xi)), dt)
+    return cast(_se3_jacobian(xi, 1, True), dt)
 
 
 @public
@@ -655,4 +685,4 @@ def se3_right_jacobian_inverse(xi: ArrayLike) -> Array:
     """
     (xi,), dt = as_float(xi)
     check_shape(xi, (6,), "xi")
-    return cast(_left_inverse(*_split_xi(-xi)), dt)
+    return cast(_se3_jacobian(xi, -1, True), dt)

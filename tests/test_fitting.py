@@ -128,6 +128,24 @@ def test_chordal_distance(dtype):
     assert_close(g, np.zeros((3, 3)), atol=0)
 
 
+_geodesic_grad_b = jax.jit(jax.grad(rj.geodesic_distance, argnums=1))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_geodesic_keeps_angles_whose_squares_underflow(dtype):
+    """A rotation by 1e-20 (float32) or 1e-160 (float64): the squared sine underflows, so the
+    distance scales before it squares. Value and gradient (unit speed) as at any other small
+    angle, not 0."""
+    angle = 1e-20 if dtype == np.float32 else 1e-160
+    eye = np.eye(3, dtype=dtype)
+    R = eye.copy()
+    R[0, 1], R[1, 0] = -angle, angle  # about z, to first order (exactly orthogonal in dtype)
+    assert_close(rj.geodesic_distance(eye, R), angle, rtol=4 * ulp(dtype))
+    want = np.zeros((3, 3))
+    want[1, 0], want[0, 1] = 0.5, -0.5  # d(angle)/dR = (E10 - E01) / 2
+    assert_close(_geodesic_grad_b(eye, R), want, atol=8 * ulp(dtype))
+
+
 # --- 6D ---------------------------------------------------------------------------------
 
 

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import rotjax as rj
-from rotjax._elementary import reciprocal, rsqrt
+from rotjax._elementary import hypot, reciprocal, rsqrt
 from rotjax._matrix import selected_column
 from rotjax._numerics import exponent_scale, max_abs_bits, signbit, unit_scale, where
 
@@ -54,6 +54,61 @@ def test_rsqrt_derivatives_and_nan(dtype):
     h = jax.grad(jax.grad(rsqrt))(jnp.asarray(4.0, dtype))
     np.testing.assert_allclose(h, 0.75 * 4.0**-2.5, rtol=8 * np.finfo(dtype).eps)
     assert np.isnan(rsqrt(jnp.asarray(np.nan, dtype)))
+
+
+_hypot3 = jax.jit(lambda v: hypot(v[..., 0], v[..., 1], v[..., 2]))
+_hypot3_grad = jax.jit(jax.vmap(jax.grad(lambda v: hypot(v[0], v[1], v[2]))))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_hypot_at_every_scale(dtype):
+    """Within 2 eps of the true norm from the smallest normal to the largest finite scale
+    (squares of either would underflow or overflow), gradient `v / |v|`; 0 with a zero gradient
+    at the origin; NaN for an infinite or NaN component."""
+    rng = np.random.default_rng(11)
+    lo, hi = RANGE[dtype]
+    v = rng.normal(size=(2000, 3)) * 10.0 ** rng.uniform(lo + 1, hi - 1, (2000, 1))
+    v = v.astype(dtype)
+    got = np.asarray(_hypot3(jnp.asarray(v)))
+    with mp.workdps(40):
+        err = [
+            float(abs(mp.mpf(float(g)) / mp.sqrt(sum(mp.mpf(float(c)) ** 2 for c in x)) - 1))
+            for g, x in zip(got, v, strict=True)
+        ]
+    assert max(err) <= 2 * np.finfo(dtype).eps, max(err) / np.finfo(dtype).eps
+    g = np.asarray(_hypot3_grad(jnp.asarray(v)), np.float64)
+    u = v / np.abs(v).max(axis=-1, keepdims=True)  # exact: the reference's squares stay finite
+    want = u / np.linalg.norm(u.astype(np.float64), axis=-1, keepdims=True)
+    np.testing.assert_allclose(g, want, atol=8 * np.finfo(dtype).eps)
+    special = jnp.asarray([[0, 0, 0], [np.inf, 1, 0], [np.nan, 1, 0], [0, -np.inf, 0]], dtype)
+    np.testing.assert_array_equal(_hypot3(special), [0, np.nan, np.nan, np.nan])
+    np.testing.assert_array_equal(_hypot3_grad(special)[0], [0, 0, 0])
+
+
+def test_hypot_rule_equals_autodiff_of_its_code():
+    """The rule is JAX's derivative of the forward code (away from the underflow it avoids),
+    to first and second order, at generic points, a zero component and the origin."""
+    from rotjax._elementary import _hypot_parts
+
+    def code(v):
+        return _hypot_parts(tuple(v))[2]
+
+    def rule(v):
+        return hypot(*v)
+
+    rng = np.random.default_rng(3)
+    vs = [rng.normal(size=3) * 10.0**k for k in (-5, 0, 7)] + [np.array([0.0, 2.0, -1.0])]
+    d = rng.normal(size=3)
+    def along(f):
+        return lambda v: jax.jvp(f, (v,), (d,))[1]
+
+    # one program per function and order, called at every point
+    pairs = [(jax.jit(along(rule)), jax.jit(along(code)))]
+    pairs.append((jax.jit(along(along(rule))), jax.jit(along(along(code)))))
+    for v in [*vs, np.zeros(3)]:
+        for order, (f, g) in enumerate(pairs, 1):
+            a, b = f(jnp.asarray(v)), g(jnp.asarray(v))
+            np.testing.assert_allclose(a, b, rtol=1e-14, atol=0, err_msg=f"{v} order {order}")
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])

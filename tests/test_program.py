@@ -120,6 +120,28 @@ CASES = {
         lambda q, w: rj.integrate_angular_velocity(q, w, 0.01, method="rk4"), [(4,), (3,)],
         (1, BYTES_SLACK, 270), (1, BYTES_SLACK, 540)
     ),
+    # The SE(3) Jacobians: each component of the tangent is read by all 36 entries, more than
+    # XLA fuses; it and two coefficients are written per rotation in small loops of their own.
+    "se3_left_jacobian": (
+        rj.se3_left_jacobian, [(6,)], (7, 1.45, 2420), (1, BYTES_SLACK, 2080)
+    ),
+    "se3_right_jacobian": (
+        rj.se3_right_jacobian, [(6,)], (7, 1.45, 2420), (1, BYTES_SLACK, 2080)
+    ),
+    "se3_left_jacobian_inverse": (
+        rj.se3_left_jacobian_inverse, [(6,)], (6, 1.4, 2530), (1, BYTES_SLACK, 2530)
+    ),
+    "se3_right_jacobian_inverse": (
+        rj.se3_right_jacobian_inverse, [(6,)], (6, 1.4, 2530), (1, BYTES_SLACK, 2530)
+    ),
+    "se3_adjoint": (rj.se3_adjoint, [(4, 4)], (2, BYTES_SLACK, 1505), (1, BYTES_SLACK, 540)),
+    "quaternion_derivative_to_angular_velocity": (
+        rj.quaternion_derivative_to_angular_velocity, [(4,), (4,)], (1, BYTES_SLACK, 110),
+        (1, BYTES_SLACK, 195)
+    ),
+    "geodesic_distance": (
+        rj.geodesic_distance, [(3, 3), (3, 3)], (1, BYTES_SLACK, 210), (1, BYTES_SLACK, 425)
+    ),
     "integrate_angular_velocity_exponential": (
         lambda q, w: rj.integrate_angular_velocity(q, w, 0.01), [(4,), (3,)],
         (1, BYTES_SLACK, 240), (1, BYTES_SLACK, 325)
@@ -358,6 +380,8 @@ NOT_FULL_WIDTH = {
     ("rotvec_to_matrix", "forward", "float64"): 1,
     ("sixd_to_matrix", "forward", "float32"): 1,
     ("sixd_to_matrix", "forward", "float64"): 1,
+    ("geodesic_distance", "gradient", "float32"): 1,
+    ("geodesic_distance", "gradient", "float64"): 1,
 }
 
 _ARITHMETIC = r"= (?:fadd|fsub|fmul|fdiv|fneg|fcmp \w+) (?:\w+ )*"
