@@ -27,6 +27,8 @@ from ._numerics import (
     as_float,
     cast,
     check_shape,
+    cross3,
+    dot3,
     eps,
     public,
     stack,
@@ -224,31 +226,30 @@ def _hat_rows(v):
 
 def _q_rows(p, r):
     """The rows of the bottom-left block ``Q(p, r)`` of the SE(3) left Jacobian of
-    ``xi = [p, r]`` (components): ``Q = 1/2 R + b (P R + R P + P R P) + d (P P R + R P P -
-    3 P R P) + f (P R P P + P P R P)``, with ``P = hat(p)``, ``R = hat(r)``,
-    ``b = (t - sin t)/t^3``, ``d = (t^2 + 2 cos t - 2)/(2 t^4)`` and
-    ``f = (2t - 3 sin t + t cos t)/(2 t^5)``."""
+    ``xi = [p, r]`` (components). Barfoot's ``Q = 1/2 R + b (P R + R P + P R P)
+    + d (P P R + R P P - 3 P R P) + f (P R P P + P P R P)``, with ``P = hat(p)``,
+    ``R = hat(r)``, ``b = (t - sin t)/t^3``, ``d = (t^2 + 2 cos t - 2)/(2 t^4)`` and
+    ``f = (2t - 3 sin t + t cos t)/(2 t^5)``, reduced by ``P R = r p^T - (p.r) I``,
+    ``P R P = -(p.r) P`` and ``P P = p p^T - t^2 I`` to ``(1/2 - 2 d t^2) R + (3d - b)(p.r) P
+    + b (r p^T + p r^T) + d (p w^T - w p^T) - 2 f (p.r) p p^T + 2 (f t^2 - b)(p.r) I``,
+    ``w = p x r``: a few terms an entry instead of seven matrix products."""
     x, k, c, a, b = _so3_coeffs(p)
     d = _series(x, _SERIES_D, lambda xb: (1 - 4 * k * k) * (0.5 * _recip(xb)))
     # 2 - 3 sin t / t + cos t, with sin t / t = 2 k c and cos t = c^2 - (k t)^2.
     f = _series(
         x, _SERIES_F, lambda xb: (2 - 6 * k * c + c * c - k * k * xb) * (0.5 * _recip(xb * xb))
     )
+    pr, w = dot3(p, r), cross3(p, r)
+    s_r, s_p, s_i, e = 0.5 - 2 * d * x, (3 * d - b) * pr, 2 * (f * x - b) * pr, -2 * f * pr
     P, R = _hat_rows(p), _hat_rows(r)
-    PR, RP = _matmul_rows(P, R), _matmul_rows(R, P)
-    PRP = _matmul_rows(PR, P)
-    PPR, RPP = _matmul_rows(P, PR), _matmul_rows(RP, P)
-    PRPP, PPRP = _matmul_rows(PRP, P), _matmul_rows(P, PRP)
-    return [
-        [
-            0.5 * R[i][j]
-            + b * (PR[i][j] + RP[i][j] + PRP[i][j])
-            + d * (PPR[i][j] + RPP[i][j] - 3 * PRP[i][j])
-            + f * (PRPP[i][j] + PPRP[i][j])
-            for j in range(3)
-        ]
-        for i in range(3)
-    ]
+
+    def entry(i, j):
+        out = b * (r[i] * p[j] + p[i] * r[j]) + e * p[i] * p[j]
+        if i == j:
+            return out + s_i
+        return out + d * (p[i] * w[j] - w[i] * p[j]) + s_r * R[i][j] + s_p * P[i][j]
+
+    return [[entry(i, j) for j in range(3)] for i in range(3)]
 
 
 def _se3_jacobian(xi, sign, inverse):

@@ -123,16 +123,16 @@ CASES = {
     # The SE(3) Jacobians: each component of the tangent is read by all 36 entries, more than
     # XLA fuses; it and two coefficients are written per rotation in small loops of their own.
     "se3_left_jacobian": (
-        rj.se3_left_jacobian, [(6,)], (7, 1.45, 2420), (1, BYTES_SLACK, 2080)
+        rj.se3_left_jacobian, [(6,)], (7, 1.45, 2130), (1, BYTES_SLACK, 1405)
     ),
     "se3_right_jacobian": (
-        rj.se3_right_jacobian, [(6,)], (7, 1.45, 2420), (1, BYTES_SLACK, 2080)
+        rj.se3_right_jacobian, [(6,)], (7, 1.45, 2130), (1, BYTES_SLACK, 1405)
     ),
     "se3_left_jacobian_inverse": (
-        rj.se3_left_jacobian_inverse, [(6,)], (6, 1.4, 2530), (1, BYTES_SLACK, 2530)
+        rj.se3_left_jacobian_inverse, [(6,)], (6, 1.4, 2245), (1, BYTES_SLACK, 1860)
     ),
     "se3_right_jacobian_inverse": (
-        rj.se3_right_jacobian_inverse, [(6,)], (6, 1.4, 2530), (1, BYTES_SLACK, 2530)
+        rj.se3_right_jacobian_inverse, [(6,)], (6, 1.4, 2245), (1, BYTES_SLACK, 1860)
     ),
     "se3_adjoint": (rj.se3_adjoint, [(4, 4)], (2, BYTES_SLACK, 1505), (1, BYTES_SLACK, 540)),
     "quaternion_derivative_to_angular_velocity": (

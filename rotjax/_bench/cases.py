@@ -560,6 +560,8 @@ INPUTS.update(
         "transform": lambda rng, q: _transforms(q, rng.normal(size=(len(q), 3))),
         # [quaternion, translation, point]: (n, 10)
         "pose_point": lambda rng, q: np.concatenate([q, rng.normal(size=(len(q), 6))], axis=1),
+        # [quaternion, translation]: (n, 7)
+        "pose": lambda rng, q: np.concatenate([q, rng.normal(size=(len(q), 3))], axis=1),
     }
 )
 
@@ -683,6 +685,31 @@ def _jlog_contenders(p):
         out.append(
             Contender("jaxlie", "jlog", jax.vmap(lambda q: SO3(jnp.roll(q, 1)).jlog()), True)
         )
+    return out
+
+
+def _se3_jlog_rotjax(x):
+    from .. import RigidTransform, Rotation, se3_right_jacobian_inverse
+
+    T = RigidTransform.from_components(x[..., 4:], Rotation.from_quat(x[..., :4]))
+    return se3_right_jacobian_inverse(T.as_exp_coords())
+
+
+def _se3_jlog_contenders(p):
+    out = [Contender("rotjax", "Jr^-1(log T)", _se3_jlog_rotjax, True)]
+    if "jaxlie" in p:
+        import jax
+        import jax.numpy as jnp
+
+        SE3 = p["jaxlie"].SE3
+        perm = jnp.array([3, 4, 5, 0, 1, 2])  # jaxlie's [v, omega] order to [omega, v]
+
+        def one(x):
+            J = SE3(jnp.concatenate([jnp.roll(x[:4], 1), x[4:]])).jlog()
+            return J[perm][:, perm]
+
+        # timed without the permutation (the case's jaxlie form)
+        out.append(Contender("jaxlie", "jlog", jax.vmap(one), True))
     return out
 
 
@@ -821,6 +848,48 @@ def rigid_apply_errors(ev):
     return errs
 
 
+def _mp_se3_jr_inv(w, t):
+    """Jr^-1 of the SE(3) coordinates ``[w, Jl(w)^-1 t]`` of ``(exp(w), t)`` (float lists), at
+    80 digits: the inverse of ``Jl(-xi) = sum_n ad(-xi)^n / (n + 1)!``, ``ad = [[W, 0], [V, W]]``
+    for ``W = hat(w)``, ``V = hat(v)`` (independent of rotjax's closed forms)."""
+    mp = _mp_lie()
+    with mp.workdps(80):
+        wm = [mp.mpf(float(c)) for c in w]
+        K = _mp_hat(wm)
+        th = mp.sqrt(sum(c * c for c in wm))
+        a, b = ((1 - mp.cos(th)) / th**2, (th - mp.sin(th)) / th**3) if th else (0.5, 1 / 6.0)
+        v = mp.lu_solve(mp.eye(3) + a * K + b * K * K, mp.matrix([float(c) for c in t]))
+        V = _mp_hat([v[0], v[1], v[2]])
+        ad = mp.zeros(6, 6)
+        for i in range(3):
+            for j in range(3):
+                ad[i, j], ad[i + 3, j + 3], ad[i + 3, j] = -K[i, j], -K[i, j], -V[i, j]
+        J, term = mp.zeros(6, 6), mp.eye(6)
+        for n in range(60):  # |ad| <= pi + |v|: the terms fall below 1e-40
+            J += term / mp.factorial(n + 1)
+            term = term * ad
+        out = mp.inverse(J)
+        return np.array([[float(out[i, j]) for j in range(6)] for i in range(6)])
+
+
+def se3_jlog_errors(ev):
+    """Componentwise, against Jr^-1 of the log (angle in [0, pi]) of the (rounded) pose."""
+    acc = ev.acc
+    rng = np.random.default_rng(37)
+    sets = {
+        k: A.as_dtype(
+            np.concatenate([acc.qsets[k], rng.normal(size=(len(acc.qsets[k]), 3))], 1), acc.dtype
+        )
+        for k in A.BASIC_SETS
+    }
+    errs = {}
+    for k, got in ev.run_sets(sets).items():
+        ws = _mp_rotvecs(sets[k][:, :4])
+        ref = np.stack([_mp_se3_jr_inv(w, x[4:]) for w, x in zip(ws, sets[k], strict=True)])
+        errs[k] = np.abs(got - ref).reshape(len(got), -1).max(-1)
+    return errs
+
+
 def so3_right_jacobian_errors(ev):
     sets = {k: v[:, :3] for k, v in _lie_sets(ev, 3).items()}
     return {
@@ -882,6 +951,13 @@ CASES.update(
             ),
             Case("so3_right_jacobian", "rotvec", _so3_jr_contenders, so3_right_jacobian_errors),
             Case("so3_jlog", "quaternion", _jlog_contenders, jlog_errors),
+            Case(
+                "se3_jlog",
+                "pose",
+                _se3_jlog_contenders,
+                se3_jlog_errors,
+                jaxlie=_jaxlie_se3(lambda SE3, x: SE3(x).jlog(), _wxyz_xyz_point),
+            ),
         ]
     }
 )
