@@ -33,6 +33,7 @@ from ._numerics import (
     exponent_scale,
     from_scalar_last,
     public,
+    recorded,
     safe_norm,
     stack,
     stack_matrix,
@@ -175,8 +176,12 @@ def chordal_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
         ```
     """
     R_a, R_b, dt = _prep_pair(R_a, R_b)
-    # On the stacked difference: its gradient is then elementwise over the (3, 3) entries,
-    # which XLA:CPU vectorises (written entry by entry, it is a scalar loop nest).
+    if recorded(R_a, matrix=True) or recorded(R_b, matrix=True):
+        # A matrix made in this trace: on its entries, in the loop of the operation before.
+        a, b = unstack_matrix(R_a), unstack_matrix(R_b)
+        return cast(hypot(*[x - y for x, y in zip(a, b, strict=True)]), dt)
+    # Matrices read from memory: on the stacked difference, whose gradient is elementwise over
+    # the (3, 3) entries, which XLA:CPU vectorises (written entry by entry, a scalar nest).
     D = R_a - R_b
     return cast(safe_norm(D.reshape(*D.shape[:-2], 9)), dt)
 

@@ -274,10 +274,10 @@ def _parts(x, matrix):
     return None if hit is None else list(hit.parts)
 
 
-def recorded(x) -> bool:
-    """Whether ``x`` is a result of :func:`stack` in this trace (whose parts :func:`unstack`
-    returns)."""
-    return _parts(x, False) is not None
+def recorded(x, matrix=False) -> bool:
+    """Whether ``x`` is a result of :func:`stack` (``matrix``: :func:`stack_matrix`) in this
+    trace, whose parts :func:`unstack` (:func:`unstack_matrix`) returns."""
+    return _parts(x, matrix) is not None
 
 
 def noted_unit(x) -> bool:

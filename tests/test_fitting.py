@@ -146,6 +146,32 @@ def test_geodesic_keeps_angles_whose_squares_underflow(dtype):
     assert_close(_geodesic_grad_b(eye, R), want, atol=8 * ulp(dtype))
 
 
+def _chordal_made(p, q):
+    # matrices made in the program: read as their entries
+    return rj.chordal_distance(rj.quaternion_to_matrix(p), rj.quaternion_to_matrix(q))
+
+
+@jax.jit
+def _chordal_both_ways(p, q):
+    """chordal_distance and its gradient in ``p`` for matrices made in the program, and the same
+    through matrices that chordal_distance receives as arguments (read as a stacked array)."""
+    Rp, Rq = rj.quaternion_to_matrix(p), rj.quaternion_to_matrix(q)
+    given = jax.vmap(rj.chordal_distance)(Rp, Rq)  # vmap's tracers: not the recorded arrays
+    dRp = jax.grad(lambda R: jnp.sum(rj.chordal_distance(R, Rq)))(Rp)
+    g_given = jax.vjp(rj.quaternion_to_matrix, p)[1](dRp)[0]
+    made = _chordal_made(p, q)
+    g_made = jax.grad(lambda p: jnp.sum(_chordal_made(p, q)))(p)
+    return (made, g_made), (given, g_given)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_chordal_distance_of_made_matrices_equals_that_of_given_ones(dtype):
+    p, q = random_quaternions(50, 6).astype(dtype), random_quaternions(50, 7).astype(dtype)
+    (d, g), (d_ref, g_ref) = _chordal_both_ways(p, q)
+    assert_close(d, d_ref, atol=8 * ulp(dtype))
+    assert_close(g, g_ref, atol=32 * ulp(dtype))
+
+
 # --- 6D ---------------------------------------------------------------------------------
 
 

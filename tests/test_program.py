@@ -493,6 +493,10 @@ COMPOSED = {
     "pose compose then apply": (
         lambda q1, t1, q2, t2, v: (_t(q1, t1) * _t(q2, t2)).apply(v),
         [(4,), (3,), (4,), (3,), (3,)]),
+    "geodesic loss on a 6D output": (
+        lambda x, m: rj.geodesic_distance(rj.sixd_to_matrix(x), m), [(6,), (3, 3)]),
+    "chordal loss on a 6D output": (
+        lambda x, m: rj.chordal_distance(rj.sixd_to_matrix(x), m), [(6,), (3, 3)]),
     # a conversion returned beside a second output
     "(matrix_to_quaternion(R), 2 t)": (lambda m, t: (rj.matrix_to_quaternion(m), 2 * t),
                                        [(3, 3), (3,)]),
@@ -526,6 +530,7 @@ _COMPOSED_FAST = {
     "Rotation.from_matrix().as_euler()",
     "gyro step q * exp(w)",
     "pose compose then apply",
+    "chordal loss on a 6D output",
     "(matrix_to_quaternion(R), 2 t)",
 }
 
