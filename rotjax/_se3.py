@@ -232,7 +232,8 @@ def _q_rows(p, r):
     ``f = (2t - 3 sin t + t cos t)/(2 t^5)``, reduced by ``P R = r p^T - (p.r) I``,
     ``P R P = -(p.r) P`` and ``P P = p p^T - t^2 I`` to ``(1/2 - 2 d t^2) R + (3d - b)(p.r) P
     + b (r p^T + p r^T) + d (p w^T - w p^T) - 2 f (p.r) p p^T + 2 (f t^2 - b)(p.r) I``,
-    ``w = p x r``: a few terms an entry instead of seven matrix products."""
+    ``w = p x r``: a few terms an entry instead of seven matrix products (the antisymmetric
+    ones gathered into one hat)."""
     x, k, c, a, b = _so3_coeffs(p)
     d = _series(x, _SERIES_D, lambda xb: (1 - 4 * k * k) * (0.5 * _recip(xb)))
     # 2 - 3 sin t / t + cos t, with sin t / t = 2 k c and cos t = c^2 - (k t)^2.
@@ -240,14 +241,15 @@ def _q_rows(p, r):
         x, _SERIES_F, lambda xb: (2 - 6 * k * c + c * c - k * k * xb) * (0.5 * _recip(xb * xb))
     )
     pr, w = dot3(p, r), cross3(p, r)
-    s_r, s_p, s_i, e = 0.5 - 2 * d * x, (3 * d - b) * pr, 2 * (f * x - b) * pr, -2 * f * pr
-    P, R = _hat_rows(p), _hat_rows(r)
+    s_i, e = 2 * (f * x - b) * pr, -2 * f * pr
+    # The antisymmetric terms as one hat: p w^T - w p^T = hat(w x p).
+    wp = cross3(w, p)
+    s_r, s_p = 0.5 - 2 * d * x, (3 * d - b) * pr
+    H = _hat_rows([s_r * rk + s_p * pk + d * wk for rk, pk, wk in zip(r, p, wp, strict=True)])
 
     def entry(i, j):
         out = b * (r[i] * p[j] + p[i] * r[j]) + e * p[i] * p[j]
-        if i == j:
-            return out + s_i
-        return out + d * (p[i] * w[j] - w[i] * p[j]) + s_r * R[i][j] + s_p * P[i][j]
+        return out + s_i if i == j else out + H[i][j]
 
     return [[entry(i, j) for j in range(3)] for i in range(3)]
 
@@ -570,7 +572,9 @@ def se3_adjoint(T: ArrayLike) -> Array:
     check_shape(T, (4, 4), "T")
     e = unstack_matrix(T)
     R, t = [e[4 * i : 4 * i + 3] for i in range(3)], [e[4 * i + 3] for i in range(3)]
-    return cast(_blocks(R, _matmul_rows(_hat_rows(t), R), R, T.shape[:-2]), dt)
+    # hat(t) R, column by column: t x (column j of R)
+    tR = [cross3(t, [row[j] for row in R]) for j in range(3)]
+    return cast(_blocks(R, [[col[i] for col in tR] for i in range(3)], R, T.shape[:-2]), dt)
 
 
 @public

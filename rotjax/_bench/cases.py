@@ -700,7 +700,7 @@ def _wxyz_xyz(x):
     """``(q scalar last, t)`` to jaxlie's ``(n, 7)`` ``wxyz_xyz``."""
     import jax.numpy as jnp
 
-    return jnp.concatenate([jnp.roll(x[0], 1, axis=-1), x[1]], axis=-1)
+    return jnp.concatenate(_roll_quaternion_first(x), axis=-1)
 
 
 def _se3_jlog_contenders(p):
