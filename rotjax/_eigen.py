@@ -206,7 +206,7 @@ def _polar(B, nan_at_zero=True, summed=False):
         cols[p], cols[q] = c * cols[p] - s * cols[q], s * cols[p] + c * cols[q]
         S = jnp.stack(cols, axis=-1)
     (wa, wb, wc), (va, vb, _) = (
-        [[S[..., i, j] for i in rows] for j in range(3)] for rows in ((0, 1, 2), (3, 4, 5))
+        [[S[..., i, j : j + 1] for i in rows] for j in range(3)] for rows in ((0, 1, 2), (3, 4, 5))
     )
     # The largest column is 0 only for B = 0: the scaled B has an entry of at least 1/2, and
     # the rotations keep its Frobenius norm.
@@ -216,7 +216,7 @@ def _polar(B, nan_at_zero=True, summed=False):
     q_entries = [
         [ua[i] * va[j] + ub[i] * vb[j] + uc[i] * vc[j] for j in range(3)] for i in range(3)
     ]
-    Q = jnp.stack([jnp.stack(row, -1) for row in q_entries], -2)
+    Q = jnp.stack([jnp.concatenate(row, -1) for row in q_entries], -2)
     # Shepperd's extraction, as in matrix_to_quaternion: the column of K = 4 q q^T with the
     # largest diagonal (at least 1 for a rotation, so |c|^2 >= 4 is in rsqrt's domain),
     # normalised to w >= 0. Within rounding of 180 degrees (|w| <= 4 eps) the selected
@@ -234,10 +234,10 @@ def _polar(B, nan_at_zero=True, summed=False):
     # components back in the loops of its tangent: XLA would compute them again in each of
     # those loops from the select, and reads them from memory after the transpose.
     if summed:
-        q = jnp.moveaxis(jnp.stack(c, axis=0) * k[None], 0, -1)
+        q = jnp.moveaxis(jnp.stack([x[..., 0] for x in c], axis=0) * k[None, ..., 0], 0, -1)
     else:
         q = stack([x * k for x in c])
-    s = jnp.stack([dot3(ua, wa), dot3(ub, wb), dot3(uc, wc)], axis=-1)
+    s = jnp.concatenate([dot3(ua, wa), dot3(ub, wb), dot3(uc, wc)], axis=-1)
     return q, Q, (S[..., 3:, :], s)
 
 

@@ -22,7 +22,6 @@ from ._numerics import (
     max_abs_bits,
     per_slot,
     public,
-    recorded,
     select,
     spread,
     stack,
@@ -242,7 +241,7 @@ def _substitute(abcd, locks):
 
 def quat_to_euler(q, seq):
     """Euler angles (output order) of a scalar-last quaternion of any non-zero norm."""
-    return _quat_to_euler_stacked(tuple(unstack(q)), seq, not recorded(q))
+    return _quat_to_euler_stacked(tuple(unstack(q)), seq)
 
 
 def _slots(x, values):
@@ -250,13 +249,11 @@ def _slots(x, values):
     return jnp.asarray(values, x.dtype).reshape((1,) * (x.ndim - 1) + (3,))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2))
-def _quat_to_euler_stacked(q, seq, sliced):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _quat_to_euler_stacked(q, seq):
     """Bernardes & Viollet 2022 (PLoS ONE 17(11): e0276302), Alg. 1, without a lock threshold,
     on the four components of ``q`` (scalar last, any non-zero norm: every step is a ratio
-    inside atan2); the ``(..., 3)`` angles in output order. ``sliced``: the components are
-    slices of an array (``unstack`` of an array that ``stack`` did not make in this trace), not
-    the parts of an earlier operation (see the derivative rule).
+    inside atan2); the ``(..., 3)`` angles in output order.
     """
     # Each output element computes its angle from the whole quaternion, spread over the three
     # slots first (see `spread`): one vectorised loop and one atan2 per output element, of the
@@ -349,19 +346,11 @@ def _euler_jacobian(comps, seq):
 
 
 @_quat_to_euler_stacked.defjvp
-def _quat_to_euler_stacked_jvp(seq, sliced, primals, tangents):
+def _quat_to_euler_stacked_jvp(seq, primals, tangents):
     # The exact derivative of the code above (see _euler_jacobian).
     (q,), (dq,) = primals, tangents
-    if sliced:
-        # Computed on `(..., 1)` components, the slices' own shape. On per-rotation arrays XLA
-        # moves each slice's reshape past the arithmetic, leaving one reshape per expression
-        # that reads the slice; with that many readers it copies each slice in a loop of its
-        # own in reverse mode. The parts of an earlier operation stay as they are (they have
-        # no reshape to move, and expanded they took 26 loops instead of one).
-        q, dq = ([x[..., None] for x in t] for t in (q, dq))
     rows = [sum(j * x for j, x in zip(row, dq, strict=True)) for row in _euler_jacobian(q, seq)]
-    out = jnp.concatenate(rows, axis=-1) if sliced else jnp.stack(rows, axis=-1)
-    return _quat_to_euler_stacked(primals[0], seq, sliced), out
+    return _quat_to_euler_stacked(q, seq), jnp.concatenate(rows, axis=-1)
 
 
 def _matrix_to_euler(R, seq):
@@ -369,7 +358,7 @@ def _matrix_to_euler(R, seq):
     depend on the quaternion's norm or sign, so the column needs no normalisation (NaN for a
     non-rotation, through its diagonal)."""
     c, _ = selected_column(tuple(entries(R)))
-    return _quat_to_euler_stacked(tuple(c), seq, False)
+    return _quat_to_euler_stacked(tuple(c), seq)
 
 
 @public

@@ -25,12 +25,14 @@ from ._elementary import atan2, hypot, rsqrt
 from ._numerics import (
     FULL,
     as_float,
+    as_part,
     broadcast_batch,
     cast,
     check_shape,
     cross3,
     dot3,
     exponent_scale,
+    from_part,
     from_scalar_last,
     public,
     recorded,
@@ -146,7 +148,7 @@ def geodesic_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
     c = 0.5 * (m[0][0] + m[1][1] + m[2][2] - 1)
     s = hypot(*[0.5 * (m[2][1] - m[1][2]), 0.5 * (m[0][2] - m[2][0]), 0.5 * (m[1][0] - m[0][1])])
     # atan2 of an infinite sine is a finite pi/2: an infinite component gives NaN instead.
-    return cast(where(jnp.isfinite(s) & jnp.isfinite(c), atan2(s, c), jnp.nan), dt)
+    return cast(from_part(where(jnp.isfinite(s) & jnp.isfinite(c), atan2(s, c), jnp.nan)), dt)
 
 
 @public
@@ -179,7 +181,7 @@ def chordal_distance(R_a: ArrayLike, R_b: ArrayLike) -> Array:
     if recorded(R_a, matrix=True) or recorded(R_b, matrix=True):
         # A matrix made in this trace: on its entries, in the loop of the operation before.
         a, b = unstack_matrix(R_a), unstack_matrix(R_b)
-        return cast(hypot(*[x - y for x, y in zip(a, b, strict=True)]), dt)
+        return cast(from_part(hypot(*[x - y for x, y in zip(a, b, strict=True)])), dt)
     # Matrices read from memory: on the stacked difference, whose gradient is elementwise over
     # the (3, 3) entries, which XLA:CPU vectorises (written entry by entry, a scalar nest).
     D = R_a - R_b
@@ -509,5 +511,6 @@ def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike, scalar_first: bool = False) 
     q = to_scalar_last(q, scalar_first)
     rel = quat_to_rotvec(quat_multiply(quat_conjugate(p), q))  # angle in [0, pi]: the shorter arc
     # t times the parts of rel (read as they are: a stacked product would be read by slices)
+    t = as_part(t)
     out = quat_multiply(p, rotvec_to_quat(stack([t * x for x in unstack(rel)])))
     return cast(from_scalar_last(out, scalar_first), dt)

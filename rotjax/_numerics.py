@@ -298,7 +298,9 @@ def noted_matrix_form(q):
 def unstack(x):
     """The components of ``x`` along its last axis, as per-rotation arrays: the one way rotjax
     reads a stacked array. For an array that :func:`stack` returned in the same trace, the parts
-    it was given; else slices."""
+    it was given; else slices ``x[..., i:i+1]``. Per-rotation arrays keep that unit axis
+    (``(..., 1)``): a squeeze after each slice counts, for XLA's fusion, once more per reader of
+    the slice, and a slice read by a long chain was then copied in a loop of its own."""
     parts = _parts(x, False)
     return parts if parts is not None else list(_read(x))
 
@@ -308,7 +310,7 @@ def _read(x):
     """The components of ``x`` (last axis) by slices; their tangents by :func:`components`
     (the same linear map), whose transpose in reverse mode writes the cotangent of ``x`` as
     :func:`stack` writes, in one vectorised loop (that of slices is a sum of pads)."""
-    return tuple(x[..., i] for i in range(x.shape[-1]))
+    return tuple(x[..., i : i + 1] for i in range(x.shape[-1]))
 
 
 @_read.defjvp
@@ -317,8 +319,30 @@ def _read_jvp(primals, tangents):
     return _read(x), tuple(_components(dx))
 
 
+def as_part(x):
+    """A per-rotation scalar argument (``(...)``, broadcasting against the batch) as the
+    per-rotation arrays of rotjax hold it, ``(..., 1)`` (see :func:`unstack`); a 0-d one
+    as it is."""
+    return x[..., None] if jnp.ndim(x) else x
+
+
+def from_part(x):
+    """A per-rotation array as rotjax returns a per-rotation scalar, ``(...)``: the inverse of
+    :func:`as_part` (a reshape of the result alone, after every reader of the parts)."""
+    return x[..., 0]
+
+
+def _part_shape(parts):
+    """The common shape of per-rotation arrays (each ``(..., 1)``, or a constant)."""
+    shape = jnp.broadcast_shapes(*(jnp.shape(p) for p in parts))
+    if not shape or shape[-1] != 1:
+        raise AssertionError(f"per-rotation arrays end in a unit axis, got {shape}")
+    return shape
+
+
 def stack(parts, unit=False, matrix_form=None):
-    """``(..., k)`` from ``k`` per-rotation arrays: the one way rotjax writes a stacked array
+    """``(..., k)`` from ``k`` per-rotation arrays (each ``(..., 1)``, see :func:`unstack`, or
+    a constant): the one way rotjax writes a stacked array
     (see :func:`unstack`). ``unit``: the parts are those of a unit quaternion (to rounding) or
     NaN, noted for :func:`noted_unit`; ``matrix_form``: noted for :func:`noted_matrix_form`.
 
@@ -330,7 +354,7 @@ def stack(parts, unit=False, matrix_form=None):
     read by several slots is computed in a loop of its own: stack its arguments instead and
     apply it to the stacked array, or ``spread`` the inputs (as quaternion_to_euler), or use the
     fusible forms of ``_elementary``."""
-    shape = jnp.broadcast_shapes(*(jnp.shape(p) for p in parts))
+    shape = _part_shape(parts)
     out = _select_stack(tuple(jnp.broadcast_to(p, shape) for p in parts))
     _note(out, parts, unit=unit, matrix_form=matrix_form)
     return out
@@ -345,8 +369,8 @@ def spread(x, k):
     element-wise operations after it, back to per-rotation values that every slot reads, and
     computes such a value in a loop of its own when it is too long to copy into each reader
     (quaternion_to_euler's power-of-two scale was)."""
-    col = jax.lax.broadcasted_iota(jnp.int32, (*jnp.shape(x), k), jnp.ndim(x))
-    return where(col == k, jnp.zeros((), x.dtype), x[..., None])
+    col = jax.lax.broadcasted_iota(jnp.int32, (*jnp.shape(x)[:-1], k), jnp.ndim(x) - 1)
+    return where(col == k, jnp.zeros((), x.dtype), x)
 
 
 def per_slot(parts):
@@ -361,8 +385,8 @@ def per_slot(parts):
 
 @jax.custom_jvp
 def _select_stack(parts):
-    shape, dims = (*parts[0].shape, len(parts)), tuple(range(parts[0].ndim))
-    return per_slot([jax.lax.broadcast_in_dim(p, shape, dims) for p in parts])
+    shape = (*parts[0].shape[:-1], len(parts))
+    return per_slot([jnp.broadcast_to(p, shape) for p in parts])
 
 
 @_select_stack.defjvp
@@ -371,7 +395,7 @@ def _select_stack_jvp(primals, tangents):
     # part's cotangent by a slice, which XLA fuses into the loop that uses it (the select's
     # transpose is a sum over the last axis per part, each a loop of its own).
     (parts,), (dparts,) = primals, tangents
-    return _select_stack(parts), jnp.stack(dparts, axis=-1)
+    return _select_stack(parts), jnp.concatenate(dparts, axis=-1)
 
 
 def stack_matrix(rows, concat=False):
@@ -387,9 +411,9 @@ def stack_matrix(rows, concat=False):
     float64)."""
     entries = [x for row in rows for x in row]
     if concat:
-        shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in entries))
+        shape = _part_shape(entries)
         rows = [[jnp.broadcast_to(x, shape) for x in row] for row in rows]
-        out = jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
+        out = jnp.stack([jnp.concatenate(row, axis=-1) for row in rows], axis=-2)
     else:
         flat = stack(entries)
         out = flat.reshape(*flat.shape[:-1], len(rows), len(rows[0]))
@@ -403,16 +427,6 @@ def noted_matrix(out, entries):
     (:func:`unstack_matrix`) takes those, as from :func:`stack_matrix`."""
     _note(out, entries, matrix=True)
     return out
-
-
-def unstack_many(x):
-    """:func:`unstack` for components that many expressions read (every entry of a Jacobian):
-    read by slices, they are kept in their own ``(..., 1)`` shape, and the caller drops that
-    axis from its result. On per-rotation slices XLA moves each slice's reshape past the
-    arithmetic that reads it, and with that many readers copies each slice in a loop of its
-    own."""
-    parts = unstack(x)
-    return parts if recorded(x) else [p[..., None] for p in parts]
 
 
 def unstack_matrix(R):
@@ -440,7 +454,7 @@ def _components(x):
     (slices transpose to pads, and a leading axis to a transposing copy of its own)."""
     k = x.shape[-1]
     col = jax.lax.broadcasted_iota(jnp.int32, (1,) * (x.ndim - 1) + (k,), x.ndim - 1)
-    return [jnp.sum(where(col == i, x, 0.0), axis=-1) for i in range(k)]
+    return [jnp.sum(where(col == i, x, 0.0), axis=-1, keepdims=True) for i in range(k)]
 
 
 def shared_tangent(parts):
@@ -449,7 +463,7 @@ def shared_tangent(parts):
     as one array in one loop, for every later reader. Left as expressions, a cotangent that
     several outputs read was computed again in each output's loop (XLA:CPU does not fuse
     several outputs into one loop)."""
-    return _components(jnp.stack(parts, axis=-1))
+    return _components(jnp.concatenate(jnp.broadcast_arrays(*parts), axis=-1))
 
 
 def max_abs(*xs):
@@ -497,7 +511,7 @@ def det3(e):
 
 def skew(v):
     """Skew-symmetric matrix `[v]x` with `skew(v) @ u == cross(v, u)`; shape `(..., 3, 3)`."""
-    x, y, z = jnp.moveaxis(v, -1, 0)
+    x, y, z = unstack(v)
     o = jnp.zeros_like(x)
     rows = ((o, -z, y), (z, o, -x), (-y, x, o))
     return stack_matrix(rows)

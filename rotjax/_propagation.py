@@ -109,7 +109,7 @@ def integrate_angular_velocity(
         # Euler's step and classical Runge-Kutta on the components (per-rotation arrays): each
         # stage reads the parts of the one before, not slices of a stacked sum, which XLA
         # copied one by one in loops of their own.
-        hs, qs = h[..., 0], unstack(q)
+        hs, qs = h, unstack(q)
 
         def f(parts):
             return unstack(quat_rate(stack(parts), w, frame))

@@ -21,6 +21,7 @@ from ._numerics import (
     cast,
     check_shape,
     exponent_scale,
+    from_part,
     from_scalar_last,
     noted_matrix_form,
     noted_unit,
@@ -466,7 +467,7 @@ def rotation_angle(q: ArrayLike, scalar_first: bool = False) -> Array:
         ```
     """
     q, dt = _prep(q, scalar_first)
-    return cast(quat_angle(q), dt)
+    return cast(from_part(quat_angle(q)), dt)
 
 
 @public
@@ -498,4 +499,4 @@ def angle_between(p: ArrayLike, q: ArrayLike, scalar_first: bool = False) -> Arr
     p, q, dt = _prep2(p, q, scalar_first)
     # prescaled factors (NaN where not a rotation): their product is of order 1, or NaN
     rel = quat_multiply(quat_conjugate(quat_prescaled(p)), quat_prescaled(q))
-    return cast(quat_angle(rel, bounded=True), dt)
+    return cast(from_part(quat_angle(rel, bounded=True)), dt)

@@ -33,10 +33,12 @@ from ._elementary import reciprocal, sin_cos
 from ._euler import parse_seq
 from ._numerics import (
     as_float,
+    as_part,
     axial,
     cast,
     check_shape,
     cross3,
+    from_part,
     from_scalar_last,
     matmul,
     public,
@@ -298,7 +300,7 @@ def angular_velocity_to_euler_rates(
     (a, w), dt = as_float(angles, omega)
     check_shape(a, (3,), "angles")
     check_shape(w, (3,), "omega")
-    d = jnp.asarray(damping).astype(a.dtype)
+    d = as_part(jnp.asarray(damping).astype(a.dtype))
     return cast(_inverse_rates(a, w, seq, frame, d), dt)
 
 
@@ -330,7 +332,7 @@ def euler_singularity(angles: ArrayLike, seq: str) -> Array:
     check_shape(a, (3,), "angles")
     axes, _ = parse_seq(seq)
     h, _, _, _ = _middle_terms(axes, unstack(a)[1])
-    return cast(jnp.abs(h), dt)
+    return cast(from_part(jnp.abs(h)), dt)
 
 
 # --- quaternion and matrix derivatives ---------------------------------------------------------
@@ -615,7 +617,7 @@ def angular_acceleration_to_euler_accelerations(
     check_shape(a, (3,), "angles")
     check_shape(r, (3,), "rates")
     check_shape(al, (3,), "alpha")
-    d = jnp.asarray(damping).astype(a.dtype)
+    d = as_part(jnp.asarray(damping).astype(a.dtype))
     terms = _rate_derivative_terms(_rate_columns(a, seq, frame), unstack(r), seq)
     rhs = stack([x - y for x, y in zip(unstack(al), terms, strict=True)])
     return cast(_inverse_rates(a, rhs, seq, frame, d), dt)

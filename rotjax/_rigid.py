@@ -58,10 +58,13 @@ from ._se3 import exp_parts, homogeneous, log_parts
 # inverse from rotjax._se3 (applied without forming the matrix), on the quaternion.
 
 
-def _rotate(q, v):
-    """``R(q) v`` for a unit scalar-last ``q``, both of one batch shape."""
+def _rotate(q, v, t=None):
+    """``R(q) v`` (``+ t``) for a unit scalar-last ``q``, all of one batch shape. Sums and
+    negations of results are taken on their components (see :func:`_pose_inv`): an array
+    operation on a stacked result leaves an array that its readers slice."""
     v = unstack(v)
-    return stack([a + d for a, d in zip(v, quat_turn(unstack(q), v), strict=True)])
+    out = [a + d for a, d in zip(v, quat_turn(unstack(q), v), strict=True)]
+    return out if t is None else [a + b for a, b in zip(out, unstack(t), strict=True)]
 
 
 def _pose_exp(xi):
@@ -113,13 +116,13 @@ def _pose_compose(q1, t1, q2, t2):
     # NaN where either is not a rotation.
     q1, t1, q2, t2 = broadcast_batch(q1, t1, q2, t2)
     u1 = quat_normalize(q1)
-    return quat_multiply(u1, quat_rescaled(q2)), t1 + _rotate(u1, t2)
+    return quat_multiply(u1, quat_rescaled(q2)), stack(_rotate(u1, t2, t1))
 
 
 @jit
 def _pose_inv(q, t):
     qc = quat_conjugate(q)
-    return qc, -_rotate(qc, t)
+    return qc, stack([-x for x in _rotate(qc, t)])
 
 
 @jit(static_argnames="inverse")
@@ -133,7 +136,7 @@ def _pose_apply(q, t, v, inverse):
         r, t, v = jnp.broadcast_to(r, batch + (3, 3)), *broadcast_batch(t, v)
         return matvec(r, v) + t
     q, t, v = broadcast_batch(q, t, v)
-    return _rotate(q, v) + t
+    return stack(_rotate(q, v, t))
 
 
 @jit

@@ -37,6 +37,7 @@ from ._numerics import (
     check_static,
     cross,
     det3,
+    from_part,
     jit,
     to_scalar_last,
     unstack_matrix,
@@ -99,7 +100,7 @@ def constructor_input(x):
 def _from_matrix_checked(matrix):
     # scipy raises for det <= 0; a traced function cannot, so those rotations are NaN.
     q = matrix_to_quaternion(matrix, method="optimal")
-    return where((det3(unstack_matrix(matrix)) > 0)[..., None], q, jnp.nan)
+    return where(det3(unstack_matrix(matrix)) > 0, q, jnp.nan)
 
 
 @jit(static_argnames="scalar_first")
@@ -1174,7 +1175,7 @@ class Rotation(BatchedPytree):
             # [0.5 3. ]
             ```
         """
-        return _read(self._stored, quat_angle, self._bounded)
+        return _read(self._stored, lambda q, b: from_part(quat_angle(q, b)), self._bounded)
 
     def approx_equal(
         self, other: Rotation, atol: ArrayLike | None = None, degrees: bool = False

@@ -19,6 +19,7 @@ from ._numerics import (
     check_shape,
     eps,
     exponent_scale,
+    from_part,
     from_scalar_last,
     noted_matrix,
     per_slot,
@@ -350,14 +351,14 @@ def axis_angle_to_quaternion(
     check_shape(axis, (3,), "axis")
     if degrees:
         angle = jnp.deg2rad(angle)
-    batch = jnp.broadcast_shapes(axis.shape[:-1], angle.shape)
+    batch = (*jnp.broadcast_shapes(axis.shape[:-1], angle.shape), 1)
     # The axis scaled by a power of two first, so that its norm can neither overflow nor
     # underflow; a zero, infinite or NaN axis gives NaN. The half angle's sine and cosine as
     # for the Euler and rotation-vector conversions (`sin_cos`): one loop.
     a = [jnp.broadcast_to(x, batch) for x in unstack(axis)]
     scale, _ = exponent_scale(*a, mark=True)
     a = [x * scale for x in a]
-    sin_h, cos_h = sin_cos(0.5 * jnp.broadcast_to(angle, batch))
+    sin_h, cos_h = sin_cos(0.5 * jnp.broadcast_to(angle[..., None], batch))
     k = sin_h * rsqrt(sum_squares(a))  # the sum is in [1, 12) or NaN: rsqrt's domain
     q = stack([x * k for x in a] + [where(jnp.isnan(scale), jnp.nan, cos_h)], unit=True)
     return cast(from_scalar_last(q, scalar_first), dt)
@@ -407,9 +408,11 @@ def quaternion_to_axis_angle(
     m2 = sum_squares(v)  # at least 1 (or eps^2 for a subnormal part) unless 0: rsqrt's domain
     ident = m2 == 0
     inv = rsqrt(where(ident, 1.0, m2))
-    angle = quat_angle(q)
-    # NaN (not a valid-looking identity) for the zero quaternion or a non-finite component.
-    nan = jnp.isnan(angle)
+    angle = from_part(quat_angle(q))
+    # NaN (not a valid-looking identity) for the zero quaternion or a non-finite component, as
+    # the angle, but from the components' bits: the angle's atan2 (a division), read by both
+    # outputs, would be computed in a loop of its own.
+    nan = jnp.isnan(exponent_scale(x, y, z, w, mark=True)[0])
     axis = [where(ident, e, c * inv) for c, e in zip(v, (1.0, 0.0, 0.0), strict=True)]
     axis = stack([where(nan, jnp.nan, c) for c in axis])
     if degrees:

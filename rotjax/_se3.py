@@ -35,7 +35,6 @@ from ._numerics import (
     stack_matrix,
     sum_squares,
     unstack,
-    unstack_many,
     unstack_matrix,
     where,
 )
@@ -193,9 +192,8 @@ def _left(p):
 
 
 def _so3_jacobian(p, coeffs):
-    """``_combo(*coeffs(parts), parts)`` for the components ``parts`` of ``p``, read by
-    :func:`rotjax._numerics.unstack_many` (each is read by every entry)."""
-    parts = unstack_many(p)
+    """``_combo(*coeffs(parts), parts)`` for the components ``parts`` of ``p``."""
+    parts = unstack(p)
     return _combo(*coeffs(parts), parts).reshape(*p.shape[:-1], 3, 3)
 
 
@@ -256,9 +254,8 @@ def _q_rows(p, r):
 
 def _se3_jacobian(xi, sign, inverse):
     """The SE(3) left Jacobian of ``sign * xi`` (``sign = -1``: the right one), or its inverse,
-    on the components of ``xi`` read by :func:`rotjax._numerics.unstack_many` (each is read
-    by every entry of the ``(..., 6, 6)`` result)."""
-    parts = unstack_many(xi)
+    on the components of ``xi``."""
+    parts = unstack(xi)
     if sign < 0:
         parts = [-x for x in parts]
     p, r = parts[:3], parts[3:]

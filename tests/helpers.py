@@ -109,18 +109,19 @@ def padded_call(f, x, *args, **kwargs):
 
 def undecorated(kernel, *static, matrix=()):
     """The function a component kernel's wrapper computes, with the kernel's ``custom_jvp``
-    removed: its arguments split into components by slicing (a matrix, index in ``matrix``,
-    into its nine entries row by row), the results stacked on the last axis (a stacked result
-    as it is). JAX's derivative of this is the reference a hand-written rule must equal."""
+    removed: its arguments split into components by slicing (per-rotation arrays of shape
+    ``(..., 1)``, as rotjax holds them; a matrix, index in ``matrix``, into its nine entries row
+    by row), the results joined on the last axis (a stacked result as it is). JAX's derivative
+    of this is the reference a hand-written rule must equal."""
 
     def split(i, x):
         if i in matrix:
-            return tuple(x[..., r, c] for r in range(3) for c in range(3))
-        return tuple(x[..., k] for k in range(x.shape[-1]))
+            return tuple(x[..., r, c : c + 1] for r in range(3) for c in range(3))
+        return tuple(x[..., k : k + 1] for k in range(x.shape[-1]))
 
     def fun(*xs):
         out = kernel.fun(*(split(i, x) for i, x in enumerate(xs)), *static)
-        return out if isinstance(out, jax.Array) else jnp.stack(out, axis=-1)
+        return out if isinstance(out, jax.Array) else jnp.concatenate(out, axis=-1)
 
     return fun
 

@@ -689,7 +689,7 @@ def test_euler_hand_written_derivative_equals_autodiff_of_its_formula(seq):
     forward code's selects define the gradient rule), 180 degrees; second derivatives too."""
     from rotjax._euler import _quat_to_euler_stacked, quat_to_euler
 
-    ref = undecorated(_quat_to_euler_stacked, seq, True)  # the flag selects the rule's form
+    ref = undecorated(_quat_to_euler_stacked, seq)
 
     q = _euler_test_quaternions(seq)
     rng = np.random.default_rng(5)

@@ -146,10 +146,11 @@ def test_selected_column_norm_is_in_rsqrt_domain_for_any_finite_matrix(R):
     column's squared norm is at least t^2 >= 1/12 and bounded, at any scale; NaN for zero.
     XLA flushes subnormals to zero, so a matrix of subnormal entries only is the zero matrix."""
     _, sq = selected_column(jnp.asarray(R))
+    sq = np.asarray(sq).item()  # one rotation's per-rotation array, (1,)
     if not np.any(np.abs(R) >= np.finfo(np.float64).tiny):
-        assert np.isnan(float(sq))
+        assert np.isnan(sq)
     else:
-        assert 1 / 12 <= float(sq) <= 400.0
+        assert 1 / 12 <= sq <= 400.0
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
