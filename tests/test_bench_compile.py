@@ -24,7 +24,7 @@ def test_targets_cover_every_conversion_and_pipeline():
     got = C.targets(found)
     names = {(g, n) for g, n, _ in got}
     assert {("conversion", op) for op in CASES} <= names
-    assert sum(g == "pipeline" for g, _ in names) == 7
+    assert sum(g == "pipeline" for g, _ in names) == 8
     rotjax = [t for t in got if t[2].startswith("rotjax")]
     assert len({t[1] for t in rotjax}) == len({t[1] for t in got})  # rotjax in every group
 

@@ -18,7 +18,7 @@ def test_programs_cover_every_conversion_method_and_pipeline():
     m2q = {c for n, c in conversions if n == "matrix_to_quaternion"}
     assert m2q == {"rotjax shepperd", "rotjax markley", "rotjax optimal"}
     pipes = [(n, c) for g, n, c, _, _ in progs if g == "pipeline"]
-    assert len(pipes) == 14 and {c for _, c in pipes} == {"rotjax functions", "rotjax objects"}
+    assert len(pipes) == 15 and {c for _, c in pipes} == {"rotjax functions", "rotjax objects"}
     with pytest.raises(ValueError, match="unknown operations or pipelines"):
         S.programs(found, ["no_such_operation"])
 

@@ -188,6 +188,27 @@ def pipelines(peers):
                 and (lambda p, t, q, u, v: (T(SRT, SR, p, t) * T(SRT, SR, q, u)).apply(v)),
             },
         ),
+        # The residual of pose graphs and SLAM. rotjax's functions have no pose type (a pose is
+        # a RigidTransform, or a 4x4 matrix for se3_log), so this one has no function chain.
+        "pose error log(a^-1 b)": (
+            ("p", "t", "q", "u"),
+            {
+                "rotjax objects": lambda p, t, q, u: (
+                    T(RigidTransform, Rotation, p, t).inv() * T(RigidTransform, Rotation, q, u)
+                ).as_exp_coords(),
+                "jaxlie": jl
+                and jax.vmap(
+                    lambda p, t, q, u: (
+                        jl.SE3.from_rotation_and_translation(jl.SO3(p), t).inverse()
+                        @ jl.SE3.from_rotation_and_translation(jl.SO3(q), u)
+                    ).log()
+                ),
+                "scipy on JAX": SRT
+                and (
+                    lambda p, t, q, u: (T(SRT, SR, p, t).inv() * T(SRT, SR, q, u)).as_exp_coords()
+                ),
+            },
+        ),
     }
     return {k: (keys, {c: f for c, f in fs.items() if f}) for k, (keys, fs) in out.items()}
 
