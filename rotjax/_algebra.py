@@ -14,6 +14,7 @@ from jax.typing import ArrayLike, DTypeLike
 from ._numerics import (
     FULL,
     as_float,
+    as_part,
     cast,
     check_shape,
     check_static,
@@ -21,7 +22,9 @@ from ._numerics import (
     like_rank,
     matmul,
     public,
+    stack,
     to_scalar_last,
+    unstack,
     where,
 )
 from ._quaternion import quat_multiply, quat_normalize
@@ -108,7 +111,9 @@ def quaternion_power(q: ArrayLike, n: ArrayLike, scalar_first: bool = False) -> 
     check_shape(q, (4,), "q")
     q = to_scalar_last(q, scalar_first)
     v = quat_to_rotvec(q)
-    out = rotvec_to_quat(like_rank(n, v[..., 0])[..., None] * v)
+    # n times v's components (an array product would be read back by slices: see stack)
+    n = as_part(like_rank(n, v[..., 0]))
+    out = rotvec_to_quat(stack([n * x for x in unstack(v)]))
     return cast(from_scalar_last(out, scalar_first), dt)
 
 

@@ -20,6 +20,7 @@ from ._elementary import rsqrt
 from ._fitting import quaternion_mean
 from ._matrix import matrix_to_quaternion
 from ._numerics import (
+    as_part,
     broadcast_batch,
     det3,
     jit,
@@ -151,8 +152,10 @@ def _as_exp_coords(q, t):
 
 @jit
 def _pow(q, t, n):
-    xi = _pose_log(q, t)
-    return _pose_exp(n[..., None] * xi)
+    n = as_part(n)
+    xi = [n * x for x in log_parts(unstack(q), unstack(t))]  # on components: see _rotate
+    q, t = exp_parts(xi[:3], xi[3:])
+    return stack(q), stack(t)
 
 
 def _normalize_dq(real, dual):

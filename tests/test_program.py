@@ -515,6 +515,12 @@ COMPOSED = {
     # and the chain's sums and negations are taken on components (a slice's squeeze and an
     # array operation on a stacked result each made XLA copy per-rotation values in loops of
     # their own: 16 loops forward, 23 for the gradient)
+    # a power: the exponent times the logarithm's components (times the stacked logarithm, an
+    # array read back by slices, it took 5 loops, 12 for a pose, and 80 ms for the gradient of
+    # 2^18 rotations)
+    "quaternion_power": (lambda q, n: rj.quaternion_power(q, n), [(4,), ()]),
+    "Rotation **": (lambda q: (rj.Rotation.from_quat(q) ** 0.5).as_quat(), [(4,)]),
+    "RigidTransform **": (lambda q, t: _parts(_t(q, t) ** 0.5), [(4,), (3,)]),
     "manifold.rminus of RigidTransforms": (
         lambda q1, t1, q2, t2: manifold.rminus(_t(q1, t1), _t(q2, t2)),
         [(4,), (3,), (4,), (3,)]),
@@ -530,6 +536,7 @@ COMPOSED_SLACK = {
     ("Rotation.from_quat().as_euler()", "gradient"): 2.3,
     ("Rotation.from_euler().as_matrix()", "forward"): 1.55,
     ("RigidTransform.inv", "forward"): 1.35,
+    ("RigidTransform **", "forward"): 1.35,
     ("RigidTransform(m, normalize=False)", "forward"): 1.7,
     ("RigidTransform(m, normalize=False)", "gradient"): 1.7,
 }
@@ -543,6 +550,7 @@ _COMPOSED_FAST = {
     "chordal loss on a 6D output",
     "(matrix_to_quaternion(R), 2 t)",
     "manifold.rminus of RigidTransforms",
+    "Rotation **",
 }
 
 
