@@ -112,7 +112,7 @@ def quaternion_power(q: ArrayLike, n: ArrayLike, scalar_first: bool = False) -> 
     q = to_scalar_last(q, scalar_first)
     v = quat_to_rotvec(q)
     # n times v's components (an array product would be read back by slices: see stack)
-    n = as_part(like_rank(n, v[..., 0]))
+    n = as_part(like_rank(n, q[..., 0]))
     out = rotvec_to_quat(stack([n * x for x in unstack(v)]))
     return cast(from_scalar_last(out, scalar_first), dt)
 
