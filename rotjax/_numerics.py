@@ -341,10 +341,10 @@ def _part_shape(parts):
 
 
 def stack(parts, unit=False, matrix_form=None):
-    """``(..., k)`` from ``k`` per-rotation arrays (each ``(..., 1)``, see :func:`unstack`, or
-    a constant): the one way rotjax writes a stacked array
-    (see :func:`unstack`). ``unit``: the parts are those of a unit quaternion (to rounding) or
-    NaN, noted for :func:`noted_unit`; ``matrix_form``: noted for :func:`noted_matrix_form`.
+    """``(..., k)`` from ``k`` per-rotation arrays (each ``(..., 1)``, or a constant): the one
+    way rotjax writes a stacked array (see :func:`unstack`). ``unit``: the parts are those of a
+    unit quaternion (to rounding) or NaN, noted for :func:`noted_unit`; ``matrix_form``: noted
+    for :func:`noted_matrix_form`.
 
     Written as a select on the last axis among the broadcast parts: each output element
     computes every part, so XLA:CPU's loop computes the shared per-rotation factors once and is
@@ -361,7 +361,7 @@ def stack(parts, unit=False, matrix_form=None):
 
 
 def spread(x, k):
-    """``(..., k)``: the per-rotation array ``x`` in each of ``k`` slots on a new last axis, for
+    """``(..., k)``: the per-rotation array ``x`` (``(..., 1)``) in each of ``k`` slots, for
     a kernel that computes each output element from the whole input (as a ``stack`` does, but
     with every step after the spread done per slot).
 

@@ -152,10 +152,8 @@ def _as_exp_coords(q, t):
 
 @jit
 def _pow(q, t, n):
-    n = as_part(n)
-    xi = [n * x for x in log_parts(unstack(q), unstack(t))]  # on components: see _rotate
-    q, t = exp_parts(xi[:3], xi[3:])
-    return stack(q), stack(t)
+    n = as_part(n)  # times the logarithm's components: see _rotate
+    return _pose_exp(stack([n * x for x in unstack(_pose_log(q, t))]))
 
 
 def _normalize_dq(real, dual):

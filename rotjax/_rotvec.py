@@ -15,6 +15,7 @@ from ._elementary import atan_ratio, rsqrt, sin_cos
 from ._matrix import quat_from_matrix
 from ._numerics import (
     as_float,
+    as_part,
     cast,
     check_shape,
     eps,
@@ -358,7 +359,7 @@ def axis_angle_to_quaternion(
     a = [jnp.broadcast_to(x, batch) for x in unstack(axis)]
     scale, _ = exponent_scale(*a, mark=True)
     a = [x * scale for x in a]
-    sin_h, cos_h = sin_cos(0.5 * jnp.broadcast_to(angle[..., None], batch))
+    sin_h, cos_h = sin_cos(0.5 * jnp.broadcast_to(as_part(angle), batch))
     k = sin_h * rsqrt(sum_squares(a))  # the sum is in [1, 12) or NaN: rsqrt's domain
     q = stack([x * k for x in a] + [where(jnp.isnan(scale), jnp.nan, cos_h)], unit=True)
     return cast(from_scalar_last(q, scalar_first), dt)
