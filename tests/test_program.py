@@ -511,16 +511,15 @@ COMPOSED = {
         lambda m: _parts(rj.RigidTransform(m, normalize=False)), [(4, 4)]),
     "se3_log": (rj.se3_log, [(4, 4)]),
     "se3_exp": (rj.se3_exp, [(6,)]),
-    # the pose error of SLAM and pose graphs: components of stored arrays are (..., 1) slices,
-    # and the chain's sums and negations are taken on components (a slice's squeeze and an
-    # array operation on a stacked result each made XLA copy per-rotation values in loops of
-    # their own: 16 loops forward, 23 for the gradient)
-    # a power: the exponent times the logarithm's components (times the stacked logarithm, an
-    # array read back by slices, it took 5 loops, 12 for a pose, and 80 ms for the gradient of
-    # 2^18 rotations)
+    # a power: the exponent times the logarithm's components (an array product of the stacked
+    # logarithm is read back by slices, which XLA copies in loops of their own)
     "quaternion_power": (lambda q, n: rj.quaternion_power(q, n), [(4,), ()]),
     "Rotation **": (lambda q: (rj.Rotation.from_quat(q) ** 0.5).as_quat(), [(4,)]),
     "RigidTransform **": (lambda q, t: _parts(_t(q, t) ** 0.5), [(4,), (3,)]),
+    # the pose error of SLAM and pose graphs: components of stored arrays are (..., 1) slices,
+    # and the chain's sums and negations are taken on components (a slice's squeeze and an
+    # array operation on a stacked result each made XLA copy per-rotation values in loops of
+    # their own)
     "manifold.rminus of RigidTransforms": (
         lambda q1, t1, q2, t2: manifold.rminus(_t(q1, t1), _t(q2, t2)),
         [(4,), (3,), (4,), (3,)]),
