@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import exponent_scale, int_type, select, signbit, sum_squares, where
+from ._numerics import exponent_scale, select, signbit, sum_squares, where
 
 # Newton's iteration for 1/sqrt(x): the integer type that reinterprets the float's bits, the
 # magic constant of the initial guess (relative error at most 3.4%), and the number of steps
@@ -238,18 +238,12 @@ _ATAN_P = {
         0.11111111105155447, -0.14285714285659828, 0.19999999999999804, -0.3333333333333333,
     ),
 }  # fmt: skip
-_QUARTER_PI = {  # (hi, lo) of k pi/4, k = 0..4, rounded to float32 / float64
-    4: (
-        (0.0, 0.7853981852531433, 1.5707963705062866, 2.356194496154785, 3.1415927410125732),
-        (0.0, -2.1855694143368964e-08, -4.371138828673793e-08, -5.962440319251527e-09,
-         -8.742277657347586e-08),
-    ),
-    8: (
-        (0.0, 0.7853981633974483, 1.5707963267948966, 2.356194490192345, 3.141592653589793),
-        (0.0, 3.061616997868383e-17, 6.123233995736766e-17, 9.184850993605148e-17,
-         1.2246467991473532e-16),
-    ),
-}  # fmt: skip
+# pi/4 = hi + lo, hi with three trailing zero bits (Cody & Waite): k hi is exact for the octant
+# index k in 0..4, so k pi/4 = k hi + k lo to about twice the dtype's precision.
+_QUARTER_PI = {
+    4: (0.785398006439209, 1.5695823663008923e-07),
+    8: (0.7853981633974483, 3.061616997868383e-17),
+}
 _TAN_PI_8 = 0.41421356237309503
 
 
@@ -286,20 +280,12 @@ def _atan2_poly(y, x):
         p = p * s + c
     r = u + u * (s * p)
     xneg = signbit(x)
-    k = select(big, 1, 0, int_type(x.dtype))  # the octant index (see int_type)
+    k = select(big, 1, 0, x.dtype)  # the octant index, as a float (exact)
     k = where(swap, 2 - k, k)  # atan2 = pi/2 - (...) above the diagonal
     k = where(xneg, 4 - k, k)  # pi - (...) for x < 0
     sign = select(swap != xneg, -1, 1, x.dtype)
     hi, lo = _QUARTER_PI[size]
-
-    def octant(vals):
-        vals = [jnp.asarray(c, x.dtype) for c in vals]  # exact: rounded to this dtype
-        v = where(k == 1, vals[1], vals[0])
-        v = where(k == 2, vals[2], v)
-        v = where(k == 3, vals[3], v)
-        return where(k == 4, vals[4], v)
-
-    a = octant(hi) + (octant(lo) + sign * r)
+    a = k * hi + (k * lo + sign * r)
     a = where(signbit(y), -a, a)
     return where((ax == 0) & (ay == 0), jnp.zeros_like(a), a)
 

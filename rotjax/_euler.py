@@ -10,7 +10,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._elementary import atan2, hypot, rsqrt, scaled_pair, sin_cos
+from ._elementary import atan2, rsqrt, scaled_pair, sin_cos
 from ._matrix import selected_column
 from ._numerics import (
     as_float,
@@ -146,12 +146,22 @@ def _euler_to_matrix(a, seq):
 
 
 def _lifted(u, v):
-    """The pair times `2^k` (exact), `k` half the exponent range, where both are below
-    `2^-k`: products with components of order 1 down to eps then stay normal."""
+    """The pair times `2^k` (exact; `k` half the exponent range), where both are below
+    `2^(2-k)`, and the inverse factor: their squares, and their products with components of
+    order 1 down to eps, then stay normal."""
     k = 2 ** (jnp.finfo(u.dtype).nexp - 2)
-    low = jnp.maximum(jnp.abs(u), jnp.abs(v)) < 2.0**-k
+    low = jnp.maximum(jnp.abs(u), jnp.abs(v)) < 2.0 ** (2 - k)
     f = select(low, 2.0**k, 1.0, u.dtype)
-    return u * f, v * f
+    return u * f, v * f, select(low, 2.0**-k, 1.0, u.dtype)
+
+
+def _modulus(u, v, inv):
+    """`|(u, v)| inv` for a lifted pair (`_lifted`): `m2 rsqrt(m2)`, whose root fuses with its
+    readers; 0 at the origin. (At exact lock the product with `inv` may flush to 0: the
+    angle it measures is below the normal range there.)"""
+    m2 = u * u + v * v
+    zero = m2 == 0  # double where: a finite derivative (0) at the origin
+    return where(zero, 0.0, m2 * rsqrt(where(zero, 1.0, m2))) * inv
 
 
 @functools.cache
@@ -265,12 +275,15 @@ def _quat_to_euler_stacked(q, seq):
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
     # substitution). The middle angle is 2 atan2(|C|, |A|) (before it).
-    # A factor below 2^-k (k half the exponent range) is multiplied by 2^k (exact; the angles
+    # A factor below 2^(2-k) (k half the exponent range) is multiplied by 2^k (exact; the angles
     # do not change): with only q scaled, the product of a small component of A and one of a
     # tiny C could underflow (b c = 1e-7 * 1e-303) and lose a turn that the others do not carry.
-    sa, sb, sc, sd = _substitute((*_lifted(a, b), *_lifted(c, d)), locks)
-    num = {"first": sb * sc - sa * sd, "mid": hypot(c, d), "third": sb * sc + sa * sd}
-    den = {"first": sa * sc + sb * sd, "mid": hypot(a, b), "third": sa * sc - sb * sd}
+    la, lb, ia = _lifted(a, b)
+    lc, ld, ic = _lifted(c, d)
+    sa, sb, sc, sd = _substitute((la, lb, lc, ld), locks)
+    mid_num, mid_den = _modulus(lc, ld, ic), _modulus(la, lb, ia)  # |C|, |A| (before it)
+    num = {"first": sb * sc - sa * sd, "mid": mid_num, "third": sb * sc + sa * sd}
+    den = {"first": sa * sc + sb * sd, "mid": mid_den, "third": sa * sc - sb * sd}
     order, factor, shift = _layout(seq)
     num, den = per_slot([num[n] for n in order]), per_slot([den[n] for n in order])
     out = atan2(num, den) * _slots(num, factor) + _slots(num, shift)
@@ -297,7 +310,7 @@ def _euler_jacobian(comps, seq):
     Im(conj(C) dC) / |C|^2 (after the lock substitution); the middle one is
     2 atan2(|C|, |A|), with derivative 2 (|A| d|C| - |C| d|A|) / (|A|^2 + |C|^2) and
     d|C| = C.dC / |C|, taken as 0 where C = 0 (at lock the middle angle sits at the edge of its
-    range, a kink: the minimum-norm subgradient, as hypot's). Near lock one factor is tiny:
+    range, a kink: the minimum-norm subgradient, as a root's). Near lock one factor is tiny:
     each is scaled by its own power of two before it is squared (`scaled_pair`), so the
     derivatives, about 1 / distance, stay right down to the lock threshold rather than
     dividing by an underflowed |C|^2.
@@ -306,11 +319,9 @@ def _euler_jacobian(comps, seq):
     of its own): every entry is per-rotation arithmetic, which the rule's transpose computes
     once per rotation in the one loop that writes the cotangent.
     """
-    scale, (a, b, c, d), (sa, sb, sc, sd), locks, bad = _factors(*comps, seq)
-    ua, ub, ma, _ = scaled_pair(sa, sb)  # substituted factors, for the outer angles
-    uc, ud, mc, _ = scaled_pair(sc, sd)
-    va, vb, _, ka = scaled_pair(a, b)  # the factors before the substitution, for the middle
-    vc, vd, _, kc = scaled_pair(c, d)
+    scale, (a, b, c, d), _, locks, bad = _factors(*comps, seq)
+    va, vb, sa, ka = scaled_pair(a, b)  # the factors before the substitution, for the middle
+    vc, vd, sc, kc = scaled_pair(c, d)
 
     def inv_modulus(u, v):  # 1 / |(u, v)| for a scaled pair, 0 at the origin (double where)
         m2 = u * u + v * v
@@ -320,9 +331,14 @@ def _euler_jacobian(comps, seq):
     # Reciprocals and roots by rsqrt (multiplications and additions: see its note): each sum
     # of squares below is at least 1 (a scaled pair, or q scaled by _factors), so every
     # derivative is computed once per rotation in the loop that writes the cotangent.
-    ya, yc = rsqrt(ua * ua + ub * ub), rsqrt(uc * uc + ud * ud)
-    p_a, p_c = scale * ma * ya * ya, scale * mc * yc * yc
     ia, ic = inv_modulus(va, vb), inv_modulus(vc, vd)
+    # The substituted factors, for the outer angles: a lock replaces a zero factor by the
+    # other, so their scaled pairs and inverse moduli are those of the other (only A or C can
+    # be zero: |A|^2 + |C|^2 >= 1).
+    ua, ub, uc, ud = _substitute((va, vb, vc, vd), locks)
+    lock_sum, lock_diff, _ = locks
+    p_a = scale * where(lock_diff, sc * ic * ic, sa * ia * ia)
+    p_c = scale * where(lock_sum, sa * ia * ia, sc * ic * ic)
     na, nc = (va * va + vb * vb) * ia * ka, (vc * vc + vd * vd) * ic * kc  # |A|, |C|
     yt = rsqrt(a * a + b * b + c * c + d * d)
     t = scale * yt * yt
