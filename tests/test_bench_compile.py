@@ -70,6 +70,30 @@ def test_projecting_programs_compare_with_projecting_peers():
     assert cells[1][8:] == ["1.60", "2.00", "0.80"]
 
 
+def test_repeats_keep_the_median_and_merging_keeps_other_rows():
+    """Repeated runs of a target give their median; a merge replaces the rows measured again,
+    keeps the others, and the table's footer gives the days the rows were measured."""
+    runs = [_row("conversion", "q", "rotjax", "float32", t, 2 * t) for t in (0.5, 0.1, 0.3)]
+    row = C._median_row(runs)
+    assert row["forward"]["cpu_s"] == 0.3 and row["grad"]["cpu_s"] == 0.6
+    assert row["repeats"] == 3
+    old_meta = {"cpu": "cpu", "date": "2026-01-01T00:00", "jax": "0", "commit": "a"}
+    old = {
+        "meta": old_meta,
+        "rows": [
+            _row("conversion", "q", "rotjax", "float32", 0.9),
+            _row("conversion", "q", "jaxlie", "float32", 0.2),
+        ],
+    }
+    new = {"meta": {**old_meta, "date": "2026-02-03T00:00", "commit": "b"}, "rows": [row]}
+    doc = C.merged(old, new)
+    assert [(r["contender"], r["forward"]["cpu_s"], r["commit"]) for r in doc["rows"]] == [
+        ("rotjax", 0.3, "b"),
+        ("jaxlie", 0.2, "a"),
+    ]
+    assert "measured 2026-01-01 to 2026-02-03" in C.markdown(doc)
+
+
 def test_targets_include_scipy_on_jax_arrays():
     """scipy's projecting from_matrix beside "optimal", its RigidTransform in the SE(3) rows."""
     from scipy.spatial.transform import Rotation

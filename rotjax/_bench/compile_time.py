@@ -107,28 +107,59 @@ def child(group, name, contender, dtype) -> dict:
     return row
 
 
-def measure(dtypes=("float32", "float64"), only=None, log=print, save=None) -> list[dict]:
-    """Every target, each in a new process (``SCIPY_ARRAY_API=1``, no compilation cache);
-    ``save(rows)`` after each."""
+def _median_row(samples: list[dict]) -> dict:
+    """One row from repeated measurements of a target: each time its median over the runs."""
+    row = {k: v for k, v in samples[0].items() if k not in ("forward", "grad")}
+    for mode in ("forward", "grad"):
+        if mode in samples[0]:
+            times = samples[0][mode]
+            row[mode] = {k: float(np.median([r[mode][k] for r in samples])) for k in times}
+    row["repeats"] = len(samples)
+    return row
+
+
+def measure(dtypes=("float32", "float64"), only=None, log=print, save=None, repeat=3) -> list[dict]:
+    """Every target, each in a new process (``SCIPY_ARRAY_API=1``, no compilation cache),
+    ``repeat`` times, the contenders of a program taking turns (a noisy machine then slows
+    them alike), and the median kept; ``save(rows)`` after each program."""
     from .cases import peers
 
     env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
     env.update(SCIPY_ARRAY_API="1", JAX_ENABLE_COMPILATION_CACHE="false")
     rows = []
     todo = [t for t in targets(peers()) if only is None or only in t[1]]
-    for i, (group, name, contender) in enumerate(todo):
+    programs = list(dict.fromkeys((group, name) for group, name, _ in todo))
+    for i, (group, name) in enumerate(programs):
+        contenders = [c for g, n, c in todo if (g, n) == (group, name)]
         for dt in dtypes:
-            arg = json.dumps([group, name, contender, dt])
-            cmd = [sys.executable, "-m", "rotjax", "bench", "compile", "--child", arg]
-            done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
-            if done.returncode != 0:
-                log(f"[compile] {name} {contender} {dt}: failed\n{done.stderr[-800:]}")
-                continue
-            rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
+            samples = {c: [] for c in contenders}
+            for _ in range(repeat):
+                for contender in contenders:
+                    arg = json.dumps([group, name, contender, dt])
+                    cmd = [sys.executable, "-m", "rotjax", "bench", "compile", "--child", arg]
+                    done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+                    if done.returncode != 0:
+                        log(f"[compile] {name} {contender} {dt}: failed\n{done.stderr[-800:]}")
+                        continue
+                    samples[contender].append(json.loads(done.stdout.strip().splitlines()[-1]))
+            rows += [_median_row(v) for v in samples.values() if v]
             if save is not None:
                 save(rows)
-            log(f"[compile {i + 1}/{len(todo)}] {name} {contender} {dt}")
+            log(f"[compile {i + 1}/{len(programs)}] {name} {dt}")
     return rows
+
+
+def merged(old: dict, new: dict) -> dict:
+    """``old``'s rows with those measured again in ``new`` replaced (same group, program,
+    contender and dtype); each row keeps the date and commit of the run that measured it."""
+    key = lambda r: (r["group"], r["name"], r["contender"], r["dtype"])  # noqa: E731
+    stamp = {k: new["meta"][k] for k in ("date", "commit")}
+    fresh = {key(r): {**r, **stamp} for r in new["rows"]}
+    rows = [fresh.pop(key(r), r) for r in old["rows"]] + list(fresh.values())
+    for r in rows:
+        for k in ("date", "commit"):
+            r.setdefault(k, old["meta"][k])
+    return {"meta": {**new["meta"], "date": old["meta"]["date"]}, "rows": rows}
 
 
 # --- report ------------------------------------------------------------------------------------
@@ -200,9 +231,15 @@ def markdown(doc) -> str:
         f"compilation cache, {BATCH} rotations; ratio: rotjax ÷ the fastest peer (below 1: "
         f"rotjax compiles faster); for the programs that project onto SO(3) (`optimal`, "
         f"`RigidTransform.from_matrix`), the fastest peer that projects too. "
-        f"{meta['cpu']}, {meta['date'][:10]}, JAX {meta['jax']}."
+        f"{meta['cpu']}, {_dates(meta, rows)}, JAX {meta['jax']}."
     )
     return "\n".join(out) + "\n"
+
+
+def _dates(meta, rows) -> str:
+    """The day, or the first and last days, on which the rows were measured."""
+    days = sorted({r.get("date", meta["date"])[:10] for r in rows})
+    return days[0] if len(days) == 1 else f"measured {days[0]} to {days[-1]}"
 
 
 def generate(json_path, out_dir, check=False) -> list[str]:
@@ -240,6 +277,12 @@ def main(argv) -> int:
     p.add_argument("--json", default=DEFAULT_JSON, help=f"output (default {DEFAULT_JSON})")
     p.add_argument("--only", help="only the programs whose name contains this")
     p.add_argument("--dtypes", default="float32,float64")
+    p.add_argument("--repeat", type=int, default=3, help="fresh processes per target (median)")
+    p.add_argument(
+        "--merge",
+        action="store_true",
+        help="replace the measured rows in --json and keep the others (with their dates)",
+    )
     p.add_argument("--child", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.child:
@@ -252,10 +295,15 @@ def main(argv) -> int:
         return rc
     meta = _meta()
 
-    def save(rows):  # after each program: an interrupted run keeps what it measured
-        Path(args.json).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
+    old = json.loads(Path(args.json).read_text()) if args.merge else None
 
-    rows = measure(tuple(args.dtypes.split(",")), args.only, lambda s: print(s, flush=True), save)
-    save(rows)
-    print(markdown({"meta": meta, "rows": rows}))
+    def save(rows):  # after each program: an interrupted run keeps what it measured
+        doc = {"meta": meta, "rows": rows}
+        doc = merged(old, doc) if old is not None else doc
+        Path(args.json).write_text(json.dumps(doc, indent=1) + "\n")
+        return doc
+
+    dtypes = tuple(args.dtypes.split(","))
+    rows = measure(dtypes, args.only, lambda s: print(s, flush=True), save, args.repeat)
+    print(markdown(save(rows)))
     return 0
