@@ -332,25 +332,24 @@ def _euler_jacobian(comps, seq):
     # of squares below is at least 1 (a scaled pair, or q scaled by _factors), so every
     # derivative is computed once per rotation in the loop that writes the cotangent.
     ia, ic = inv_modulus(va, vb), inv_modulus(vc, vd)
-    # The substituted factors, for the outer angles: a lock replaces a zero factor by the
-    # other, so their scaled pairs and inverse moduli are those of the other (only A or C can
-    # be zero: |A|^2 + |C|^2 >= 1).
-    ua, ub, uc, ud = _substitute((va, vb, vc, vd), locks)
-    lock_sum, lock_diff, _ = locks
-    p_a = scale * where(lock_diff, sc * ic * ic, sa * ia * ia)
-    p_c = scale * where(lock_sum, sa * ia * ia, sc * ic * ic)
+    lock_sum, lock_diff, flip = locks
+    pa, pc = scale * sa * ia * ia, scale * sc * ic * ic  # 1 / |A|^2, 1 / |C|^2 (scaled)
     na, nc = (va * va + vb * vb) * ia * ka, (vc * vc + vd * vd) * ic * kc  # |A|, |C|
     yt = rsqrt(a * a + b * b + c * c + d * d)
     t = scale * yt * yt
     order, factor, _ = _layout(seq)
-    locked = locks[0] | locks[1]
+    locked = lock_sum | lock_diff
+    zero = jnp.zeros_like(va)
     jac = [[], [], []]
-    for col in _abcd_patterns(seq).T:  # d(a, b, c, d) / dq_i, in q's dtype (Python floats
-        ea, eb, ec, ed = (jnp.asarray(e, ua.dtype) for e in col)  # would be float64 in where)
-        sea, seb, sec, sed = _substitute((ea, eb, ec, ed), locks)
-        j_a = (ua * seb - ub * sea) * p_a
-        j_c = (uc * sed - ud * sec) * p_c
-        j_mid = (na * (ic * (vc * ec + vd * ed)) - nc * (ia * (va * ea + vb * eb))) * t
+    for ea, eb, ec, ed in _abcd_patterns(seq).T:  # d(a, b, c, d) / dq_i: 0 or +-1
+        # Im and Re of conj(A) dA and conj(C) dC, from the scaled pairs
+        im_a, re_a = _combine(((eb, va), (-ea, vb)), zero), _combine(((ea, va), (eb, vb)), zero)
+        im_c, re_c = _combine(((ed, vc), (-ec, vd)), zero), _combine(((ec, vc), (ed, vd)), zero)
+        # A lock replaces the zero factor by (the conjugate of) the other (see _substitute):
+        # only A or C can be zero, as |A|^2 + |C|^2 >= 1.
+        j_a = where(lock_diff, flip * im_c * pc, im_a * pa)
+        j_c = where(lock_sum, flip * im_a * pa, im_c * pc)
+        j_mid = (na * (ic * re_c) - nc * (ia * re_a)) * t
         parts = {"first": j_a - j_c, "mid": j_mid, "third": j_a + j_c}
         parts = [f * parts[n] if f != 1 else parts[n] for n, f in zip(order, factor, strict=True)]
         # The angle set to 0 at lock: the substitution already makes its J cancel exactly,
@@ -359,6 +358,17 @@ def _euler_jacobian(comps, seq):
         for k in range(3):
             jac[k].append(where(bad, 0.0, parts[k]))
     return jac
+
+
+def _combine(terms, zero):
+    """`sum(c x)` over `(c, x)` for Python numbers `c`: zero terms left out, `+-1` unmultiplied
+    (`zero` where every `c` is 0)."""
+    out = None
+    for c, x in terms:
+        if c != 0:
+            x = x if c == 1 else -x if c == -1 else c * x
+            out = x if out is None else out + x
+    return zero if out is None else out
 
 
 @_quat_to_euler_stacked.defjvp
