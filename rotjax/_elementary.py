@@ -46,6 +46,13 @@ def rsqrt(x):
     return jax.lax.platform_dependent(x, cpu=_rsqrt_newton, default=jax.lax.rsqrt)
 
 
+def rsqrt_or_zero(x):
+    """`rsqrt(x)` for `x` in its domain, and 0 at `x = 0`, with a finite derivative (0) there
+    too (double where)."""
+    zero = x == 0
+    return where(zero, 0.0, rsqrt(where(zero, 1.0, x)))
+
+
 def rsqrt_shared(x):
     """`1 / sqrt(x)` as XLA's own `sqrt(1 / x)` (two roundings: within 1 ulp; JAX's derivative),
     for a value that many later operations read: XLA counts it expensive and computes it once,
@@ -322,9 +329,10 @@ def _hypot_parts(xs):
     s, inv = exponent_scale(*xs)
     ys = [x * s for x in xs]
     m2 = sum_squares(ys)  # at least eps^2 unless 0 or not finite: rsqrt's domain
-    zero = m2 == 0
-    r = rsqrt(where(zero, 1.0, m2))  # rsqrt(inf) is NaN
-    return ys, where(zero, 0.0, r), where(zero, 0.0, m2 * r) * inv
+    r = rsqrt_or_zero(m2)  # rsqrt(inf) is NaN
+    # the outer where: the second derivative stays finite at 0, where the scaled tangents are
+    # large (their squares may overflow)
+    return ys, r, where(m2 == 0, 0.0, m2 * r) * inv
 
 
 @jax.custom_jvp

@@ -10,7 +10,7 @@ import numpy as np
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._elementary import atan2, rsqrt, scaled_pair, sin_cos
+from ._elementary import atan2, rsqrt, rsqrt_or_zero, scaled_pair, sin_cos
 from ._matrix import selected_column
 from ._numerics import (
     as_float,
@@ -160,7 +160,7 @@ def _modulus(u, v, inv):
     readers; 0 at the origin. (At exact lock the product with `inv` may flush to 0: the
     angle it measures is below the normal range there.)"""
     m2 = u * u + v * v
-    zero = m2 == 0  # double where: a finite derivative (0) at the origin
+    zero = m2 == 0  # double where: finite derivatives (0) at the origin, of any order
     return where(zero, 0.0, m2 * rsqrt(where(zero, 1.0, m2))) * inv
 
 
@@ -209,8 +209,8 @@ def _layout(seq):
 
 def _factors(x, y, z, w, seq):
     """From the quaternion's components (arrays of any one shape): the power-of-two scale, the
-    scaled factors `(a, b, c, d)`, the same after the lock substitution, the lock masks, and
-    where the quaternion is zero or not finite."""
+    scaled factors `(a, b, c, d)`, the lock masks (see `_substitute`), and where the
+    quaternion is zero or not finite."""
     _, intrinsic = parse_seq(seq)
     # Scale by a power of two (exact) so that the largest component is in [1, 2): the
     # products A conj(C) and A C below then cannot underflow, whatever the norm of q.
@@ -237,7 +237,7 @@ def _factors(x, y, z, w, seq):
     # NaN for the zero quaternion rather than a valid-looking rotation, and for a NaN or
     # infinite component (the power-of-two scaling would otherwise zero the finite ones).
     bad = (big == 0) | (big >= float_bits(np.inf, x.dtype))  # NaN's bits are above inf's
-    return scale, (a, b, c, d), _substitute((a, b, c, d), locks), locks, bad
+    return scale, (a, b, c, d), locks, bad
 
 
 def _substitute(abcd, locks):
@@ -270,7 +270,7 @@ def _quat_to_euler_stacked(q, seq):
     # arguments selected for its slot, whether q is read from memory or computed by the
     # operation before.
     q = tuple(spread(x, 3) for x in q)
-    _, (a, b, c, d), _, locks, bad = _factors(*q, seq)
+    _, (a, b, c, d), locks, bad = _factors(*q, seq)
     # With A = a + ib and C = c + id the outer angles are half_sum -+ half_diff =
     # arg(A) -+ arg(C) = arg(A conj(C)) and arg(A C): one atan2 each, already in [-pi, pi]
     # (no wrap), and one rounding less than subtracting two atan2 results (after the lock
@@ -319,22 +319,18 @@ def _euler_jacobian(comps, seq):
     of its own): every entry is per-rotation arithmetic, which the rule's transpose computes
     once per rotation in the one loop that writes the cotangent.
     """
-    scale, (a, b, c, d), _, locks, bad = _factors(*comps, seq)
+    scale, (a, b, c, d), locks, bad = _factors(*comps, seq)
     va, vb, sa, ka = scaled_pair(a, b)  # the factors before the substitution, for the middle
     vc, vd, sc, kc = scaled_pair(c, d)
-
-    def inv_modulus(u, v):  # 1 / |(u, v)| for a scaled pair, 0 at the origin (double where)
-        m2 = u * u + v * v
-        zero = m2 == 0
-        return where(zero, 0.0, rsqrt(where(zero, 1.0, m2)))
 
     # Reciprocals and roots by rsqrt (multiplications and additions: see its note): each sum
     # of squares below is at least 1 (a scaled pair, or q scaled by _factors), so every
     # derivative is computed once per rotation in the loop that writes the cotangent.
-    ia, ic = inv_modulus(va, vb), inv_modulus(vc, vd)
+    m2a, m2c = va * va + vb * vb, vc * vc + vd * vd
+    ia, ic = rsqrt_or_zero(m2a), rsqrt_or_zero(m2c)  # 1 / |(u, v)| of the scaled pairs
     lock_sum, lock_diff, flip = locks
     pa, pc = scale * sa * ia * ia, scale * sc * ic * ic  # 1 / |A|^2, 1 / |C|^2 (scaled)
-    na, nc = (va * va + vb * vb) * ia * ka, (vc * vc + vd * vd) * ic * kc  # |A|, |C|
+    na, nc = m2a * ia * ka, m2c * ic * kc  # |A|, |C|
     yt = rsqrt(a * a + b * b + c * c + d * d)
     t = scale * yt * yt
     order, factor, _ = _layout(seq)

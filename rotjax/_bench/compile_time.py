@@ -159,7 +159,7 @@ def merged(old: dict, new: dict) -> dict:
     for r in rows:
         for k in ("date", "commit"):
             r.setdefault(k, old["meta"][k])
-    return {"meta": {**new["meta"], "date": old["meta"]["date"]}, "rows": rows}
+    return {"meta": new["meta"], "rows": rows}
 
 
 # --- report ------------------------------------------------------------------------------------
